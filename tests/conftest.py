@@ -1,0 +1,28 @@
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+#: the shared third-party test meshes (never copied into the project)
+MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
+NOJIT = os.environ.get("NUMBA_DISABLE_JIT", "0") == "1"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def mesh_dir():
+    if not MESH_DIR.is_dir():
+        pytest.skip(f"shared test meshes not found at {MESH_DIR} (present in CI, not in a "
+                    "fresh clone)")
+    return MESH_DIR
+
+
+def sphere_points(n, seed=0):
+    g = np.random.default_rng(seed)
+    p = g.standard_normal((n, 3))
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
