@@ -35,7 +35,8 @@ def as_generator(rng) -> np.random.Generator:
     )
 
 
-def as_float_array(a, name: str, dtype=np.float64, *, allow_int: bool = True) -> np.ndarray:
+def as_float_array(a, name: str, dtype=np.float64, *,
+                   allow_int: bool = True) -> np.ndarray:
     """Convert ``a`` to a floating array of ``dtype``; reject complex, object and bool data."""
     arr = np.asarray(a)
     if arr.dtype == object or np.iscomplexobj(arr) or arr.dtype == bool:
@@ -56,7 +57,7 @@ def check_finite(a: np.ndarray, name: str) -> None:
 
 
 def as_points(x, name: str = "x", dim: int = 3, dtype=np.float64) -> np.ndarray:
-    """Validate an (n, dim) array of finite points; a single point (dim,) is promoted to (1, dim)."""
+    """Validate an (n, dim) array of finite points; one point (dim,) becomes (1, dim)."""
     arr = as_float_array(x, name, dtype=dtype)
     if arr.ndim == 1 and arr.shape[0] == dim:
         arr = arr[None, :]

@@ -1,0 +1,24 @@
+"""The hand-differentiated residual network and its optimisers.
+
+ResidualMLP     the network: forward jets (value, J, D2, directional), reverse-mode gradients
+Adam, RMSProp, SGD, Schedule    optimisers and learning-rate schedules on flat vectors
+scipy_objective                 ``fun(theta) -> (loss, grad)`` for scipy.optimize.minimize
+"""
+
+from .activations import sigmoid, softplus
+from .mlp import ResidualMLP, n_streams
+from .optim import (
+                    SGD,
+                    Adam,
+                    Optimizer,
+                    RMSProp,
+                    Schedule,
+                    constant,
+                    cosine,
+                    make_optimizer,
+                    scipy_objective,
+                    step,
+)
+
+__all__ = ["ResidualMLP", "n_streams", "softplus", "sigmoid", "Optimizer", "Adam", "RMSProp",
+           "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer", "scipy_objective"]

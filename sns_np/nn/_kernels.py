@@ -1,0 +1,358 @@
+"""Numba kernels of the derivative engine (private).
+
+Plain functions of arrays and scalars: no validation, no classes (the Python layer in
+:mod:`sns_np.nn.mlp` validates, allocates and picks the kernel). ``prange`` runs only over the
+outer point loop and every kernel writes into preallocated arrays.
+
+Stream layout
+-------------
+Activations of a chunk of ``c`` points are stored as ``(c, S, w)`` arrays: for each point the
+value stream (index 0), then ``m`` first-order streams (derivatives along the m directions),
+then the second-order streams of the pairs ``(a, b)``, ``a <= b < k``, in row-major order.
+``S = 1 + m + k (k + 1) / 2``.
+
+Transcendentals
+---------------
+LLVM does not vectorise calls to libm's exp and log1p, which would make the elementwise passes
+cost a third of the matrix products. :func:`_exp_parts` and :func:`_softplus_sigmoid` evaluate
+e = exp(-|z|) (Cody-Waite reduction, degree-12 Taylor polynomial, 2^n assembled from its bits)
+and log1p(e) = 2 atanh(e / (2 + e)) (odd series) with arithmetic only, so both loops vectorise
+(AVX2/AVX-512). Relative error below 1e-15 for |z| < 708; beyond, exp(-|z|) is clamped at
+exp(-708) ~ 3e-308 (an absolute error below 1e-307 on softplus and sigmoid).
+``error_model="numpy"`` removes Python's zero-division check, which blocks vectorisation.
+"""
+
+from __future__ import annotations
+
+import os
+
+# Numba's OpenMP workers and OpenBLAS's threads both spin-wait after a parallel region. The
+# engine alternates BLAS products with Numba passes dozens of times per chunk, and with both
+# pools spinning on 2 cores each pass waits for the other's spinners: measured 8.2 ms instead
+# of 1.6 ms per product + pass. A passive OpenMP wait policy removes that. It must be set
+# before Numba loads its OpenMP layer (at the first parallel launch); a user's own setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+from numba import njit, prange  # noqa: E402
+
+_LOG2E = 1.4426950408889634
+_LN2_HI = 0.6931471803691238
+_LN2_LO = 1.9082149292705877e-10
+_SHIFT = 6755399441055744.0  # 1.5 * 2**52: adding and subtracting it rounds to an integer
+
+_JIT = dict(cache=True, fastmath={"contract"}, error_model="numpy")
+_PJIT = dict(_JIT, parallel=True)
+
+
+@njit(**_JIT)
+def _exp_parts(z, p, ib):
+    """p[j] * 2^n[j] = exp(-|z[j]|): the mantissa polynomial in p, the 2^n bits in ib."""
+    for j in range(z.shape[0]):
+        t = max(-abs(z[j]), -708.0)
+        n = (t * _LOG2E + _SHIFT) - _SHIFT
+        r = (t - n * _LN2_HI) - n * _LN2_LO
+        p[j] = 1.0 + r * (1.0 + r * (1 / 2 + r * (1 / 6 + r * (1 / 24 + r * (
+            1 / 120 + r * (1 / 720 + r * (1 / 5040 + r * (1 / 40320 + r * (
+                1 / 362880 + r * (1 / 3628800 + r * (1 / 39916800 + r / 479001600)))))))))))
+        ib[j] = np.int64(n + 1023.0) << 52
+
+
+@njit(**_JIT)
+def _softplus_sigmoid(z, p, fb, a, sig, s2):
+    """a = softplus(z), sig = sigmoid(z), s2 = sig (1 - sig), from the parts of exp(-|z|)."""
+    for j in range(z.shape[0]):
+        e = p[j] * fb[j]
+        u = e / (2.0 + e)
+        u2 = u * u
+        lg = 2.0 * u * (1.0 + u2 * (1 / 3 + u2 * (1 / 5 + u2 * (1 / 7 + u2 * (1 / 9 + u2 * (
+            1 / 11 + u2 * (1 / 13 + u2 * (1 / 15 + u2 * (1 / 17 + u2 * (1 / 19 + u2 * (
+                1 / 21 + u2 * (1 / 23 + u2 * (1 / 25 + u2 * (1 / 27 + u2 * (
+                    1 / 29 + u2 * (1 / 31 + u2 / 33))))))))))))))))
+        zj = z[j]
+        q = 1.0 / (1.0 + e)
+        sj = q * (e if zj < 0.0 else 1.0)
+        a[j] = max(zj, 0.0) + lg
+        sig[j] = sj
+        s2[j] = sj * (1.0 - sj)
+
+
+@njit(**_PJIT)
+def softplus_values(z, out):
+    """out = softplus(z) for a 2-D array (a convenience for tests and order-0 passes)."""
+    c, w = z.shape
+    for i in prange(c):
+        p = np.empty(w)
+        ib = np.empty(w, np.int64)
+        sig = np.empty(w)
+        s2 = np.empty(w)
+        zi = np.empty(w)
+        for j in range(w):
+            zi[j] = z[i, j]
+        _exp_parts(zi, p, ib)
+        a = np.empty(w)
+        _softplus_sigmoid(zi, p, ib.view(np.float64), a, sig, s2)
+        for j in range(w):
+            out[i, j] = a[j]
+
+
+@njit(**_PJIT)
+def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
+    """Fused forward jet rule of softplus on all streams of a chunk.
+
+    Z : (c, S, w) pre-activation streams. With ``has_res`` the residual input R (c, S, w) is
+        added first, and with ``has_bias`` the bias (w,) is added to the value stream; the
+        complete pre-activation is written back into Z (the tape of the backward pass).
+    out : (c, S, w) activation streams (may be Z itself when no tape is kept).
+    sig : (c, w) receives s'(z) = sigmoid of the value stream.
+
+    a = s(z);  a_a = s'(z) z_a;  a_ab = s''(z) z_a z_b + s'(z) z_ab
+    """
+    c, S, w = Z.shape
+    for i in prange(c):
+        p = np.empty(w)
+        ib = np.empty(w, np.int64)
+        fb = ib.view(np.float64)
+        s1 = np.empty(w)
+        s2 = np.empty(w)
+        a0 = np.empty(w)
+        if has_res:
+            for s in range(S):
+                for j in range(w):
+                    Z[i, s, j] += R[i, s, j]
+        if has_bias:
+            for j in range(w):
+                Z[i, 0, j] += bias[j]
+        z0 = Z[i, 0]
+        _exp_parts(z0, p, ib)
+        _softplus_sigmoid(z0, p, fb, a0, s1, s2)
+        q = 1 + m
+        for a in range(k):
+            for b in range(a, k):
+                for j in range(w):
+                    out[i, q, j] = s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j] + s1[j] * Z[i, q, j]
+                q += 1
+        for a in range(m):
+            for j in range(w):
+                out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
+        for j in range(w):
+            out[i, 0, j] = a0[j]
+            sig[i, j] = s1[j]
+
+
+@njit(**_PJIT)
+def softplus_jet_back(Z, sig, Abar, Zbar, m):
+    """Reverse of the first-order jet rule (value and m first-order streams).
+
+    Given cotangents Abar (c, 1+m, w) of a = s(z), a_a = s'(z) z_a, write into Zbar (may alias
+    Abar) the cotangents of the pre-activation streams:
+
+        zbar_a = s'(z) abar_a
+        zbar   = s'(z) abar + s''(z) sum_a abar_a z_a
+    """
+    c = Z.shape[0]
+    w = Z.shape[2]
+    for i in prange(c):
+        acc = np.zeros(w)
+        for a in range(m):
+            for j in range(w):
+                g = Abar[i, 1 + a, j]
+                acc[j] += g * Z[i, 1 + a, j]
+                Zbar[i, 1 + a, j] = sig[i, j] * g
+        for j in range(w):
+            s = sig[i, j]
+            Zbar[i, 0, j] = s * Abar[i, 0, j] + s * (1.0 - s) * acc[j]
+
+
+# ---------------------------------------------------------------------------------------------
+# Small networks (width <= 32): one point per iteration, every layer in registers and L1.
+# BLAS call overhead dominates at these sizes, so the whole jet is one kernel.
+# ---------------------------------------------------------------------------------------------
+
+
+@njit(**_JIT)
+def _small_act(z, out, sig, s2, m, k):
+    """In-register jet rule for one point: z, out (S, w); sig, s2 (w,) scratch outputs."""
+    S, w = z.shape
+    p = np.empty(w)
+    ib = np.empty(w, np.int64)
+    a0 = np.empty(w)
+    _exp_parts(z[0], p, ib)
+    _softplus_sigmoid(z[0], p, ib.view(np.float64), a0, sig, s2)
+    q = 1 + m
+    for a in range(k):
+        for b in range(a, k):
+            for j in range(w):
+                out[q, j] = s2[j] * z[1 + a, j] * z[1 + b, j] + sig[j] * z[q, j]
+            q += 1
+    for a in range(m):
+        for j in range(w):
+            out[1 + a, j] = sig[j] * z[1 + a, j]
+    for j in range(w):
+        out[0, j] = a0[j]
+
+
+@njit(**_JIT)
+def _small_linear(A, W, b, out, has_bias):
+    """out[s] = W @ A[s] for every stream s (+ b on the value stream)."""
+    S, n_in = A.shape
+    n_out = W.shape[0]
+    for s in range(S):
+        for r in range(n_out):
+            acc = 0.0
+            for j in range(n_in):
+                acc += W[r, j] * A[s, j]
+            out[s, r] = acc
+    if has_bias:
+        for r in range(n_out):
+            out[0, r] += b[r]
+
+
+@njit(**_PJIT)
+def small_forward(x, D, W0, b0, W1, b1, W2, b2, W3, b3, has_bias, m, k, Y):
+    """Forward jets of a small residual MLP, one point per iteration.
+
+    x : (n, d) inputs; D : (n, d, m) directions; Y : (n, S, o) output streams.
+    """
+    n, d = x.shape
+    w = W0.shape[0]
+    depth = W1.shape[0]
+    S = Y.shape[1]
+    for i in prange(n):
+        z = np.zeros((S, w))
+        h = np.empty((S, w))
+        a = np.empty((S, w))
+        u = np.empty((S, w))
+        sig = np.empty(w)
+        s2 = np.empty(w)
+        for r in range(w):
+            acc = 0.0
+            for j in range(d):
+                acc += W0[r, j] * x[i, j]
+            z[0, r] = acc + (b0[r] if has_bias else 0.0)
+            for c in range(m):
+                acc = 0.0
+                for j in range(d):
+                    acc += W0[r, j] * D[i, j, c]
+                z[1 + c, r] = acc
+        _small_act(z, h, sig, s2, m, k)
+        for blk in range(depth):
+            _small_linear(h, W1[blk], b1[blk], u, has_bias)
+            _small_act(u, a, sig, s2, m, k)
+            _small_linear(a, W2[blk], b2[blk], z, has_bias)
+            for s in range(S):
+                for j in range(w):
+                    z[s, j] += h[s, j]
+            _small_act(z, h, sig, s2, m, k)
+        _small_linear(h, W3, b3, Y[i], has_bias)
+
+
+@njit(**_JIT)
+def _small_act_back(z, sig, abar, zbar, m):
+    """Reverse of the first-order jet rule for one point (zbar may alias abar)."""
+    w = z.shape[1]
+    for j in range(w):
+        acc = 0.0
+        for a in range(m):
+            g = abar[1 + a, j]
+            acc += g * z[1 + a, j]
+            zbar[1 + a, j] = sig[j] * g
+        s = sig[j]
+        zbar[0, j] = s * abar[0, j] + s * (1.0 - s) * acc
+
+
+@njit(**_JIT)
+def _small_linear_back(Zbar, A, W, gW, gb, Abar, has_bias, accumulate_input):
+    """Reverse of out[s] = W A[s] (+ b): gW += sum_s Zbar[s] A[s]^T, gb += Zbar[0],
+    Abar[s] (+)= W^T Zbar[s]."""
+    S, n_out = Zbar.shape
+    n_in = A.shape[1]
+    for s in range(S):
+        for r in range(n_out):
+            g = Zbar[s, r]
+            for j in range(n_in):
+                gW[r, j] += g * A[s, j]
+    if has_bias:
+        for r in range(n_out):
+            gb[r] += Zbar[0, r]
+    for s in range(S):
+        for j in range(n_in):
+            acc = 0.0
+            for r in range(n_out):
+                acc += W[r, j] * Zbar[s, r]
+            if accumulate_input:
+                Abar[s, j] += acc
+            else:
+                Abar[s, j] = acc
+
+
+@njit(**_PJIT)
+def small_vjp(x, D, W0, b0, W1, b1, W2, b2, W3, b3, has_bias, m, Ybar,
+              gW0, gb0, gW1, gb1, gW2, gb2, gW3, gb3):
+    """Parameter gradient of sum(Ybar * Y) for first-order streams Y (n, 1+m, o).
+
+    The gradient arrays carry a leading thread-block axis (nblk, ...): block t accumulates the
+    points of its own slice, the caller sums over blocks (deterministic for a fixed nblk).
+    """
+    n, d = x.shape
+    w = W0.shape[0]
+    depth = W1.shape[0]
+    S = 1 + m
+    nblk = gW0.shape[0]
+    for t in prange(nblk):
+        lo = (n * t) // nblk
+        hi = (n * (t + 1)) // nblk
+        # tape: block inputs h, inner pre-activations u, inner activations a, outer pre-acts z
+        H = np.empty((depth + 1, S, w))
+        U = np.empty((depth, S, w))
+        A = np.empty((depth, S, w))
+        Zt = np.empty((depth, S, w))
+        Z0 = np.zeros((S, w))
+        SG0 = np.empty(w)
+        SGU = np.empty((depth, w))
+        SGZ = np.empty((depth, w))
+        s2 = np.empty(w)
+        hbar = np.empty((S, w))
+        abar = np.empty((S, w))
+        for i in range(lo, hi):
+            for r in range(w):
+                acc = 0.0
+                for j in range(d):
+                    acc += W0[r, j] * x[i, j]
+                Z0[0, r] = acc + (b0[r] if has_bias else 0.0)
+                for c in range(m):
+                    acc = 0.0
+                    for j in range(d):
+                        acc += W0[r, j] * D[i, j, c]
+                    Z0[1 + c, r] = acc
+            _small_act(Z0, H[0], SG0, s2, m, 0)
+            for blk in range(depth):
+                _small_linear(H[blk], W1[blk], b1[blk], U[blk], has_bias)
+                _small_act(U[blk], A[blk], SGU[blk], s2, m, 0)
+                _small_linear(A[blk], W2[blk], b2[blk], Zt[blk], has_bias)
+                for s in range(S):
+                    for j in range(w):
+                        Zt[blk, s, j] += H[blk, s, j]
+                _small_act(Zt[blk], H[blk + 1], SGZ[blk], s2, m, 0)
+            # backward
+            _small_linear_back(Ybar[i], H[depth], W3, gW3[t], gb3[t], hbar, has_bias, False)
+            for blk in range(depth - 1, -1, -1):
+                _small_act_back(Zt[blk], SGZ[blk], hbar, hbar, m)       # hbar := zbar
+                _small_linear_back(hbar, A[blk], W2[blk], gW2[t, blk], gb2[t, blk], abar,
+                                   has_bias, False)
+                _small_act_back(U[blk], SGU[blk], abar, abar, m)        # abar := ubar
+                # residual: hbar (= zbar) keeps flowing, plus W1^T ubar
+                _small_linear_back(abar, H[blk], W1[blk], gW1[t, blk], gb1[t, blk], hbar,
+                                   has_bias, True)
+            _small_act_back(Z0, SG0, hbar, hbar, m)
+            for s in range(S):
+                for r in range(w):
+                    g = hbar[s, r]
+                    if s == 0:
+                        if has_bias:
+                            gb0[t, r] += g
+                        for j in range(d):
+                            gW0[t, r, j] += g * x[i, j]
+                    else:
+                        for j in range(d):
+                            gW0[t, r, j] += g * D[i, j, s - 1]

@@ -1,0 +1,298 @@
+"""First-order optimisers and learning-rate schedules on flat parameter vectors.
+
+Every optimiser updates ``theta`` in place from a gradient of the same shape, keeps its state
+in a few arrays (``state_dict`` / ``load_state_dict`` for checkpoints) and takes its learning
+rate from a schedule evaluated at the step count.
+
+For ``scipy.optimize``, :func:`scipy_objective` wraps a network and a loss into
+``fun(theta) -> (loss, grad)`` for ``minimize(fun, theta0, jac=True, method="L-BFGS-B")``.
+
+References
+----------
+Kingma, D. P., & Ba, J. (2015). Adam: A method for stochastic optimization. ICLR.
+Tieleman, T., & Hinton, G. (2012). Lecture 6.5, RMSProp. COURSERA: Neural Networks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from .._validation import check_positive_float, check_positive_int
+from ..errors import DivergenceError, ShapeError
+
+__all__ = ["Schedule", "constant", "cosine", "step", "Optimizer", "SGD", "Adam", "RMSProp",
+           "make_optimizer", "scipy_objective"]
+
+
+# ------------------------------------------------------------------------------ schedules
+
+class Schedule:
+    """A learning rate as a function of the step count t = 0, 1, 2, ...
+
+    Parameters
+    ----------
+    kind : {"constant", "cosine", "step"}
+    lr : float
+        Initial (peak) learning rate.
+    total : int, cosine only
+        Steps over which the rate decays from ``lr`` to ``lr_min``; constant afterwards.
+    lr_min : float, cosine only
+    every, gamma : step only
+        Multiply the rate by ``gamma`` every ``every`` steps.
+    warmup : int
+        Linear ramp from lr / warmup to lr over the first ``warmup`` steps (all kinds).
+    """
+
+    KINDS = ("constant", "cosine", "step")
+
+    def __init__(self, kind="constant", lr=1e-3, total=None, lr_min=0.0, every=None, gamma=0.5,
+                 warmup=0):
+        if kind not in self.KINDS:
+            raise ValueError(f"unknown schedule {kind!r}; expected one of {self.KINDS}")
+        self.kind = kind
+        self.lr = check_positive_float(lr, "lr")
+        self.lr_min = check_positive_float(lr_min, "lr_min", allow_zero=True)
+        self.warmup = check_positive_int(warmup, "warmup", minimum=0)
+        if kind == "cosine":
+            if total is None:
+                raise ValueError("the cosine schedule needs total= (number of decay steps)")
+            self.total = check_positive_int(total, "total")
+        else:
+            self.total = None
+        if kind == "step":
+            if every is None:
+                raise ValueError("the step schedule needs every= (steps between decays)")
+            self.every = check_positive_int(every, "every")
+            self.gamma = check_positive_float(gamma, "gamma")
+        else:
+            self.every, self.gamma = None, gamma
+
+    def __call__(self, t: int) -> float:
+        if self.kind == "constant":
+            lr = self.lr
+        elif self.kind == "cosine":
+            frac = min(t, self.total) / self.total
+            lr = self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + math.cos(math.pi * frac))
+        else:
+            lr = self.lr * self.gamma ** (t // self.every)
+        if self.warmup and t < self.warmup:
+            lr *= (t + 1) / self.warmup
+        return lr
+
+    def __repr__(self):
+        return f"Schedule({self.kind!r}, lr={self.lr:g})"
+
+
+def constant(lr):
+    """A constant learning rate."""
+    return Schedule("constant", lr)
+
+
+def cosine(lr, total, lr_min=0.0, warmup=0):
+    """Cosine decay from ``lr`` to ``lr_min`` over ``total`` steps."""
+    return Schedule("cosine", lr, total=total, lr_min=lr_min, warmup=warmup)
+
+
+def step(lr, every, gamma=0.5):
+    """Multiply the rate by ``gamma`` every ``every`` steps."""
+    return Schedule("step", lr, every=every, gamma=gamma)
+
+
+def _as_schedule(lr):
+    if isinstance(lr, Schedule) or callable(lr):
+        return lr
+    return constant(lr)
+
+
+# ------------------------------------------------------------------------------ optimisers
+
+class Optimizer:
+    """Base class: holds the schedule, the step count and named state arrays."""
+
+    _state_names: tuple = ()
+
+    def __init__(self, lr):
+        self.schedule = _as_schedule(lr)
+        self.t = 0
+        self._state = {}
+
+    def lr(self) -> float:
+        """The learning rate of the next step."""
+        return float(self.schedule(self.t))
+
+    def _buffers(self, theta):
+        if not self._state:
+            for name in self._state_names:
+                self._state[name] = np.zeros_like(theta)
+        ref = self._state[self._state_names[0]] if self._state_names else None
+        if ref is not None and ref.shape != theta.shape:
+            raise ShapeError(f"optimiser state has shape {ref.shape} but theta has "
+                             f"{theta.shape}; use a new optimiser for a new model")
+        return [self._state[name] for name in self._state_names]
+
+    def step(self, theta: np.ndarray, grad: np.ndarray) -> np.ndarray:
+        """Update ``theta`` in place from ``grad``; returns theta."""
+        if not isinstance(theta, np.ndarray) or not np.issubdtype(theta.dtype, np.floating):
+            raise ShapeError("theta must be a floating numpy array (updated in place)")
+        grad = np.asarray(grad)
+        if grad.shape != theta.shape:
+            raise ShapeError(f"grad has shape {grad.shape}, expected {theta.shape}")
+        if not np.all(np.isfinite(grad)):
+            raise DivergenceError(
+                f"non-finite gradient at step {self.t}; parameters left unchanged")
+        self._update(theta, grad.astype(theta.dtype, copy=False), self.lr())
+        self.t += 1
+        return theta
+
+    def _update(self, theta, g, lr):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def state_dict(self) -> dict:
+        """Arrays describing the optimiser (for checkpoints); restore with load_state_dict."""
+        out = {"t": np.array(self.t), "kind": np.array(type(self).__name__)}
+        for name, arr in self._state.items():
+            out[name] = arr.copy()
+        return out
+
+    def load_state_dict(self, state: dict) -> Optimizer:
+        kind = str(state.get("kind", ""))
+        if kind != type(self).__name__:
+            raise ValueError(f"optimiser state is for {kind!r}, not {type(self).__name__!r}")
+        self.t = int(state["t"])
+        self._state = {name: np.array(state[name]) for name in self._state_names
+                       if name in state}
+        return self
+
+
+class SGD(Optimizer):
+    """Gradient descent with optional (Nesterov) momentum.
+
+    buf = momentum buf + g;  theta -= lr (g + momentum buf if nesterov else buf)
+    """
+
+    _state_names = ("buf",)
+
+    def __init__(self, lr=1e-2, momentum=0.0, nesterov=False):
+        super().__init__(lr)
+        self.momentum = check_positive_float(momentum, "momentum", allow_zero=True)
+        self.nesterov = bool(nesterov)
+
+    def _update(self, theta, g, lr):
+        if self.momentum == 0.0:
+            theta -= lr * g
+            return
+        (buf,) = self._buffers(theta)
+        buf *= self.momentum
+        buf += g
+        theta -= lr * (g + self.momentum * buf if self.nesterov else buf)
+
+
+class Adam(Optimizer):
+    """Adam (Kingma & Ba 2015).
+
+    m = b1 m + (1 - b1) g;   v = b2 v + (1 - b2) g^2          (first and second moments)
+    m^ = m / (1 - b1^t);     v^ = v / (1 - b2^t)              (bias correction, t from 1)
+    theta -= lr m^ / (sqrt(v^) + eps)
+    """
+
+    _state_names = ("m", "v")
+
+    def __init__(self, lr=1e-3, betas=(0.9, 0.999), eps=1e-8):
+        super().__init__(lr)
+        b1, b2 = betas
+        if not (0.0 <= b1 < 1.0 and 0.0 <= b2 < 1.0):
+            raise ValueError(f"betas must lie in [0, 1), got {betas}")
+        self.b1, self.b2 = float(b1), float(b2)
+        self.eps = check_positive_float(eps, "eps")
+
+    def _update(self, theta, g, lr):
+        m, v = self._buffers(theta)
+        t = self.t + 1
+        m *= self.b1
+        m += (1.0 - self.b1) * g
+        v *= self.b2
+        v += (1.0 - self.b2) * (g * g)
+        mhat_scale = 1.0 / (1.0 - self.b1 ** t)
+        vhat_scale = 1.0 / (1.0 - self.b2 ** t)
+        theta -= (lr * mhat_scale) * m / (np.sqrt(v * vhat_scale) + self.eps)
+
+
+class RMSProp(Optimizer):
+    """RMSProp with momentum, in the form of PyTorch's ``RMSprop`` (which the reference uses).
+
+    v = alpha v + (1 - alpha) g^2;   d = g / (sqrt(v) + eps)
+    buf = momentum buf + d;          theta -= lr buf     (theta -= lr d without momentum)
+
+    The reference fits surfaces with lr 1e-4 and momentum 0.9 (alpha 0.99, eps 1e-8).
+    """
+
+    _state_names = ("v", "buf")
+
+    def __init__(self, lr=1e-4, alpha=0.99, eps=1e-8, momentum=0.9):
+        super().__init__(lr)
+        if not 0.0 <= alpha < 1.0:
+            raise ValueError(f"alpha must lie in [0, 1), got {alpha}")
+        self.alpha = float(alpha)
+        self.eps = check_positive_float(eps, "eps")
+        self.momentum = check_positive_float(momentum, "momentum", allow_zero=True)
+
+    def _update(self, theta, g, lr):
+        v, buf = self._buffers(theta)
+        v *= self.alpha
+        v += (1.0 - self.alpha) * (g * g)
+        d = g / (np.sqrt(v) + self.eps)
+        if self.momentum:
+            buf *= self.momentum
+            buf += d
+            theta -= lr * buf
+        else:
+            theta -= lr * d
+
+
+_OPTIMIZERS = {"adam": Adam, "rmsprop": RMSProp, "sgd": SGD}
+
+
+def make_optimizer(name: str, lr, **options) -> Optimizer:
+    """Optimiser by name: "adam", "rmsprop" or "sgd"."""
+    key = str(name).lower()
+    if key not in _OPTIMIZERS:
+        raise ValueError(f"unknown optimiser {name!r}; expected one of {sorted(_OPTIMIZERS)}")
+    return _OPTIMIZERS[key](lr=lr, **options)
+
+
+def scipy_objective(net, x, loss_fn: Callable, order: int = 1, directions=None):
+    """``fun(theta) -> (loss, grad)`` in float64 for ``scipy.optimize.minimize(jac=True)``.
+
+    Parameters
+    ----------
+    net : ResidualMLP
+    x : (n, in_dim) float array of inputs
+    loss_fn : callable, as in :meth:`ResidualMLP.value_and_grad`
+    order : int, 0 or 1
+    directions : (n, in_dim, m) float array, optional
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.optimize
+    >>> from sns_np.nn import ResidualMLP
+    >>> net = ResidualMLP(width=8, depth=1, seed=0)
+    >>> x = np.random.default_rng(0).standard_normal((64, 3))
+    >>> def loss(y, JD, sl):          # fit y = x, mean squared error
+    ...     r = y - x[sl]
+    ...     return (r ** 2).sum() / len(x), 2 * r / len(x), None
+    >>> fun = scipy_objective(net, x, loss, order=0)
+    >>> theta0 = net.pack()
+    >>> res = scipy.optimize.minimize(fun, theta0, jac=True, method="L-BFGS-B",
+    ...                               options=dict(maxiter=50))
+    >>> bool(res.fun < 0.1 * fun(theta0)[0])
+    True
+    """
+    def fun(theta):
+        net.unpack(theta)
+        loss, grad = net.value_and_grad(x, loss_fn, order=order, directions=directions)
+        return float(loss), np.asarray(grad, dtype=np.float64)
+
+    return fun

@@ -1,0 +1,283 @@
+"""The residual network: jets and gradients against central differences, packing, files."""
+
+import numpy as np
+import pytest
+
+from sns_np.errors import ModelFileError, ShapeError
+from sns_np.nn import ResidualMLP, sigmoid, softplus
+from sns_np.nn import _kernels as K
+from sns_np.nn.activations import softplus_derivatives
+from sns_np.testing import check_directional_jet, check_gradient, check_jet
+
+# (width, depth, bias): the BLAS path (width > 32) and the small-network Numba path
+ARCHS = [(48, 2, False), (40, 1, True), (10, 2, False), (12, 3, True), (33, 0, True)]
+
+
+def make_net(width, depth, bias, seed=0, dtype=np.float64):
+    net = ResidualMLP(width=width, depth=depth, bias=bias, seed=seed, dtype=dtype)
+    g = np.random.default_rng(seed + 1)
+    # generic parameters: non-zero biases, an output layer of order one
+    net.W3[...] = g.standard_normal(net.W3.shape) / np.sqrt(width)
+    for b in ("b0", "b1", "b2", "b3"):
+        arr = getattr(net, b)
+        arr[...] = 0.3 * g.standard_normal(arr.shape)
+    return net
+
+
+def test_parameter_count_of_reference_network():
+    net = ResidualMLP()
+    assert net.n_params == 1_050_112
+    assert ResidualMLP(bias=True).n_params == 1_050_112 + 256 + 2 * 8 * 256 + 3
+
+
+def test_softplus_kernel_matches_numpy_reference():
+    z = np.concatenate([np.linspace(-750, 750, 3001), np.random.default_rng(0).normal(0, 8, 999)])
+    z = z.reshape(4, -1)
+    out = np.empty_like(z)
+    K.softplus_values(z, out)
+    ref = softplus(z)
+    big = np.abs(z) < 700
+    assert np.max(np.abs(out - ref)[big] / np.abs(ref[big])) < 1e-14
+    assert np.max(np.abs(out - ref)) < 1e-300 + 1e-12 * np.max(np.abs(ref))
+    assert np.allclose(sigmoid(z), np.exp(-np.logaddexp(0, -z)), rtol=1e-14, atol=0)
+    s, s1, s2, s3 = softplus_derivatives(np.array([0.0]))
+    assert np.allclose([s[0], s1[0], s2[0], s3[0]], [np.log(2), 0.5, 0.25, 0.0])
+
+
+def test_fused_jet_kernel_against_formula():
+    g = np.random.default_rng(3)
+    c, m, k, w = 5, 3, 2, 37
+    S = 1 + m + k * (k + 1) // 2
+    Z = g.standard_normal((c, S, w)) * 3
+    out = np.empty_like(Z)
+    sig = np.empty((c, w))
+    bias = g.standard_normal(w)
+    Zin = Z.copy()
+    K.softplus_jet(Z, Z, bias, out, sig, m, k, False, True)
+    z = Zin[:, 0] + bias
+    s0, s1, s2 = softplus_derivatives(z, 2)
+    assert np.allclose(Z[:, 0], z)                        # bias written back for the tape
+    assert np.allclose(out[:, 0], s0, rtol=1e-14)
+    assert np.allclose(sig, s1, rtol=1e-14)
+    for a in range(m):
+        assert np.allclose(out[:, 1 + a], s1 * Zin[:, 1 + a], rtol=1e-13)
+    q = 1 + m
+    for a in range(k):
+        for b in range(a, k):
+            ref = s2 * Zin[:, 1 + a] * Zin[:, 1 + b] + s1 * Zin[:, q]
+            assert np.allclose(out[:, q], ref, rtol=1e-12, atol=1e-14)
+            q += 1
+
+
+@pytest.mark.parametrize("width,depth,bias", ARCHS)
+def test_jacobian_and_hessian_match_central_differences(width, depth, bias):
+    net = make_net(width, depth, bias)
+    x = np.random.default_rng(7).standard_normal((25, 3))
+    y, J, D2 = net.jet(x, 2)
+    assert y.shape == (25, 3) and J.shape == (25, 3, 3) and D2.shape == (25, 3, 3, 3)
+    err = check_jet(net, x, order=2, h=1e-4, richardson=True)
+    assert err["J"] < 1e-6, err
+    assert err["D2"] < 1e-6, err
+    assert err["D2_symmetry"] == 0.0
+    # orders agree with each other
+    y1, J1 = net.jet(x, 1)
+    assert np.array_equal(net.jet(x, 0), y) or np.allclose(net.jet(x, 0), y, rtol=1e-14)
+    assert np.allclose(J1, J, rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("width,depth,bias", ARCHS[:3])
+def test_directional_jets(width, depth, bias):
+    net = make_net(width, depth, bias)
+    g = np.random.default_rng(11)
+    x = g.standard_normal((19, 3))
+    D = g.standard_normal((19, 3, 3))
+    for second in (None, 2, 0):
+        err = check_directional_jet(net, x, D, order=2, second=second, h=1e-4, richardson=True)
+        assert err["JD_vs_full"] < 1e-12 and err["D2D_vs_full"] < 1e-12, err
+        assert err["JD_vs_fd"] < 1e-6 and err["D2D_vs_fd"] < 1e-6, err
+    y, JD, D2D = net.jet(x, 2, directions=D, second=2)
+    assert JD.shape == (19, 3, 3) and D2D.shape == (19, 3, 2, 2)
+    y1, JD1 = net.jet(x, 1, directions=D[:, :, :2])
+    assert JD1.shape == (19, 3, 2) and np.allclose(JD1, JD[:, :, :2], rtol=1e-13, atol=1e-15)
+
+
+def _loss_and_grad(net, x, dy, dJ, D=None):
+    def fun(theta):
+        net.unpack(theta)
+        loss = 0.0
+        if dJ is None:
+            loss = np.sum(dy * net.jet(x, 0))
+        else:
+            y, J = net.jet(x, 1, directions=D) if D is not None else net.jet(x, 1)
+            loss = np.sum(dy * y) + np.sum(dJ * J)
+        return float(loss), net.vjp(x, dy, dJ, directions=D)
+    return fun
+
+
+@pytest.mark.parametrize("width,depth,bias", [(6, 1, True), (34, 1, True)])
+@pytest.mark.parametrize("which", ["dy", "dJ", "both"])
+def test_vjp_every_parameter_of_a_tiny_network(width, depth, bias, which):
+    net = make_net(width, depth, bias, seed=2)
+    g = np.random.default_rng(5)
+    x = g.standard_normal((9, 3))
+    dy = g.standard_normal((9, 3)) if which != "dJ" else np.zeros((9, 3))
+    dJ = g.standard_normal((9, 3, 3)) if which != "dy" else None
+    fun = _loss_and_grad(net, x, dy, dJ)
+    err = check_gradient(fun, net.pack(), h=1e-5, n_directions=None)
+    assert err < 1e-6, err
+
+
+@pytest.mark.parametrize("width,depth,bias", [(64, 3, False), (20, 2, True)])
+def test_vjp_random_directions_larger_network(width, depth, bias):
+    net = make_net(width, depth, bias, seed=4)
+    g = np.random.default_rng(6)
+    x = g.standard_normal((40, 3))
+    dy, dJ = g.standard_normal((40, 3)), g.standard_normal((40, 3, 3))
+    D = g.standard_normal((40, 3, 2))
+    dJD = g.standard_normal((40, 3, 2))
+    for fun in (_loss_and_grad(net, x, dy, dJ), _loss_and_grad(net, x, dy, dJD, D)):
+        err = check_gradient(fun, net.pack(), h=1e-5, n_directions=12, rng=0, richardson=True)
+        assert err < 1e-7, err
+
+
+def test_value_and_grad_chunks_and_loss_sum():
+    """A mean-squared loss through value_and_grad equals the same loss via vjp, any chunking."""
+    g = np.random.default_rng(8)
+    x = g.standard_normal((300, 3))
+    target = g.standard_normal((300, 3))
+    results = []
+    for chunk in (None, 7, 300):
+        net = make_net(40, 2, False, seed=9)
+        net.chunk_size = chunk
+
+        def loss(y, JD, sl):
+            r = y - target[sl]
+            dJ = 0.1 * JD
+            return (r ** 2).sum() / 300 + 0.05 * (JD ** 2).sum(), 2 * r / 300, dJ
+
+        results.append(net.value_and_grad(x, loss, order=1))
+    for val, grad in results[1:]:
+        assert np.isclose(val, results[0][0], rtol=1e-12)
+        assert np.allclose(grad, results[0][1], rtol=1e-10, atol=1e-13)
+    net = make_net(40, 2, False, seed=9)
+    y, J = net.jet(x, 1)
+    ref = net.vjp(x, 2 * (y - target) / 300, 0.1 * J)
+    assert np.allclose(results[0][1], ref, rtol=1e-10, atol=1e-13)
+
+
+def test_chunking_does_not_change_jets():
+    x = np.random.default_rng(1).standard_normal((101, 3))
+    a = make_net(64, 2, True)
+    b = make_net(64, 2, True)
+    b.chunk_size = 6
+    for pa, pb in zip(a.jet(x, 2), b.jet(x, 2)):
+        assert np.allclose(pa, pb, rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.parametrize("width", [10, 64])
+def test_float32_network_agrees_with_float64(width):
+    n64 = make_net(width, 2, True)
+    n32 = n64.astype(np.float32)
+    x = np.random.default_rng(2).standard_normal((50, 3))
+    for a64, a32 in zip(n64.jet(x, 2), n32.jet(x, 2)):
+        assert a32.dtype == np.float32
+        scale = np.max(np.abs(a64))
+        assert np.max(np.abs(a32 - a64)) < 1e-4 * scale
+    dy = np.random.default_rng(3).standard_normal((50, 3))
+    g64, g32 = n64.vjp(x, dy), n32.vjp(x, dy)
+    assert g32.dtype == np.float32
+    assert np.max(np.abs(g32 - g64)) < 1e-3 * np.max(np.abs(g64))
+
+
+def test_pack_unpack_and_views():
+    net = make_net(12, 2, True)
+    theta = net.pack()
+    W1 = net.W1
+    assert theta.shape == (net.n_params,)
+    new = np.arange(net.n_params, dtype=np.float64) / net.n_params
+    net.unpack(new)
+    assert np.array_equal(net.pack(), new)
+    assert np.shares_memory(W1, net.theta) and W1[0, 0, 0] == net.W1[0, 0, 0]
+    sl, shape = net.param_slices()["W2"]
+    assert np.array_equal(new[sl].reshape(shape), net.W2)
+    theta[0] = 123.0  # pack returns a copy
+    assert net.theta[0] != 123.0
+
+
+def test_save_load_round_trip(tmp_path):
+    for dtype in (np.float64, np.float32):
+        net = make_net(20, 2, True, dtype=dtype)
+        path = net.save(tmp_path / f"net_{np.dtype(dtype).name}.npz")
+        back = ResidualMLP.load(path)
+        assert back.architecture() == net.architecture() and back.dtype == net.dtype
+        assert np.array_equal(back.pack(), net.pack())
+        x = np.random.default_rng(0).standard_normal((5, 3))
+        assert np.array_equal(back.jet(x, 0), net.jet(x, 0))
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_load_rejects_foreign_and_corrupt_files(tmp_path):
+    net = make_net(10, 1, False)
+    good = net.save(tmp_path / "good.npz")
+    with pytest.raises(ModelFileError, match="does not exist"):
+        ResidualMLP.load(tmp_path / "missing.npz")
+    bad = tmp_path / "garbage.npz"
+    bad.write_bytes(b"not a zip file at all")
+    with pytest.raises(ModelFileError, match="not a readable"):
+        ResidualMLP.load(bad)
+    foreign = tmp_path / "foreign.npz"
+    np.savez(foreign, weights=np.zeros(3))
+    with pytest.raises(ModelFileError, match="missing field"):
+        ResidualMLP.load(foreign)
+    state = dict(np.load(good))
+    state["format_version"] = np.array(99)
+    np.savez(tmp_path / "future.npz", **state)
+    with pytest.raises(ModelFileError, match="version 99"):
+        ResidualMLP.load(tmp_path / "future.npz")
+    state = dict(np.load(good))
+    state["theta"] = state["theta"][:-1]
+    np.savez(tmp_path / "short.npz", **state)
+    with pytest.raises(ModelFileError, match="parameter vector"):
+        ResidualMLP.load(tmp_path / "short.npz")
+    state = dict(np.load(good))
+    state["theta"] = np.array([object()] * 3, dtype=object)
+    np.savez(tmp_path / "pickled.npz", **state)
+    with pytest.raises(ModelFileError, match="cannot be read safely"):
+        ResidualMLP.load(tmp_path / "pickled.npz")
+
+
+def test_bad_inputs_are_rejected():
+    net = make_net(10, 1, False)
+    with pytest.raises(ShapeError, match=r"shape \(n, 3\)"):
+        net.jet(np.zeros((4, 2)))
+    with pytest.raises(ShapeError, match="non-finite"):
+        net.jet(np.array([[0.0, np.nan, 1.0]]))
+    with pytest.raises(ShapeError, match="real floating"):
+        net.jet(np.zeros((2, 3), dtype=complex))
+    with pytest.raises(ValueError, match="order must be"):
+        net.jet(np.zeros((2, 3)), order=3)
+    with pytest.raises(ShapeError, match="directions must have shape"):
+        net.jet(np.zeros((2, 3)), 1, directions=np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="second"):
+        net.jet(np.zeros((2, 3)), 2, directions=np.zeros((2, 3, 2)), second=3)
+    with pytest.raises(ShapeError, match="theta must have shape"):
+        net.unpack(np.zeros(net.n_params + 1))
+    with pytest.raises(ShapeError, match="real floating"):
+        net.unpack(np.zeros(net.n_params, dtype=np.int64))
+    with pytest.raises(ShapeError, match="dJ must have shape"):
+        net.vjp(np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 3, 2)))
+    with pytest.raises(ValueError, match="dtype must be"):
+        ResidualMLP(dtype=np.int32)
+    with pytest.raises(ValueError, match="width must be"):
+        ResidualMLP(width=0)
+    with pytest.raises(ValueError, match=r"\.npz"):
+        net.save("model.txt")
+
+
+def test_large_input_is_chunked_and_bounded():
+    """1,000,000 points through a wide network: works, and the result matches small calls."""
+    net = make_net(40, 1, False)
+    x = np.random.default_rng(0).standard_normal((1_000_000, 3))
+    y = net.jet(x, 0)
+    assert y.shape == (1_000_000, 3) and np.all(np.isfinite(y))
+    assert np.allclose(y[-5:], net.jet(x[-5:], 0), rtol=1e-13)
