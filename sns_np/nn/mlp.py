@@ -356,6 +356,24 @@ class ResidualMLP:
         """The value y (n, out_dim) at x (n, in_dim)."""
         return self.jet(x, 0)
 
+    def features(self, x, chunk_size=65536):
+        """The last hidden layer h(x) (n, width), so that ``y = h W3^T + b3``.
+
+        Used to fit the output layer by least squares (a warm start for fitting); plain NumPy.
+        """
+        from .activations import softplus
+
+        x = self._check_x(x)
+        out = np.empty((x.shape[0], self.width), self.dtype)
+        for lo in range(0, x.shape[0], chunk_size):
+            xs = x[lo:lo + chunk_size]
+            h = softplus(xs @ self.W0.T + (self.b0 if self.bias else 0.0))
+            for blk in range(self.depth):
+                a = softplus(h @ self.W1[blk].T + (self.b1[blk] if self.bias else 0.0))
+                h = softplus(h + a @ self.W2[blk].T + (self.b2[blk] if self.bias else 0.0))
+            out[lo:lo + chunk_size] = h
+        return out
+
     def _bias_args(self):
         return self.b0, self.b1, self.b2, self.b3
 

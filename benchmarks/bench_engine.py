@@ -1,0 +1,158 @@
+"""Engine benchmark: forward jets and the training step, as ratios measured in one run.
+
+Run:  python benchmarks/bench_engine.py [--quick] [--no-torch]
+
+For the reference network (width 256, depth 8, no biases) it prints, per dtype:
+
+* the machine's matrix-product rate for the engine's own product shapes;
+* full ``jet(order=2)`` at 4096 points: time, the same matrix products timed alone, their
+  ratio (the engine's efficiency), and the speed-up over PyTorch's fastest full Hessian;
+* one training step of the reference loss at 2048 points (position MSE + 1e-4 normal error,
+  gradient for all 1,050,112 parameters): time, and the speed-up over PyTorch's fastest
+  variant.
+
+Targets (issue 2): efficiency >= 0.80 and >= 2.5x PyTorch for the full jet; training step
+>= 1.3x PyTorch in float32 and >= 1.0x in float64. Nothing is asserted: the script prints.
+The first call of every kernel (Numba compilation) is a warm-up and is never timed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from sns_np.nn import ResidualMLP  # noqa: E402
+from sns_np.surface.losses import position_normal_loss  # noqa: E402
+
+
+def best_time(fn, repeats=3):
+    fn()  # warm-up: compilation, allocation, BLAS thread start
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def sphere_frame(p):
+    """Orthonormal tangent frame (n, 3, 2) with e_u x e_v = p (benchmark-local helper)."""
+    a = np.where(np.abs(p[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    eu = np.cross(a, p)
+    eu /= np.linalg.norm(eu, axis=1, keepdims=True)
+    ev = np.cross(p, eu)
+    return np.stack([eu, ev], axis=2)
+
+
+def matmul_products_time(net, rows, dtype, repeats):
+    """The jet's block products alone: 2 x depth products (rows, w) @ (w, w)."""
+    A = np.random.default_rng(0).random((rows, net.width)).astype(dtype)
+    B = np.empty_like(A)
+
+    def run():
+        for blk in range(net.depth):
+            np.matmul(A, net.W1[blk].T, out=B)
+            np.matmul(B, net.W2[blk].T, out=A)
+
+    return best_time(run, repeats)
+
+
+def training_matmul_time(net, n, S, dtype, repeats):
+    """The training step's products alone: forward 2, backward 4 per block over n*S rows."""
+    A = np.random.default_rng(0).random((n * S, net.width)).astype(dtype)
+    B = np.empty_like(A)
+    G = np.empty((net.width, net.width), dtype)
+
+    def run():
+        for blk in range(net.depth):
+            np.matmul(A, net.W1[blk].T, out=B)
+            np.matmul(B, net.W2[blk].T, out=A)
+        for blk in range(net.depth):
+            np.matmul(A.T, B, out=G)
+            np.matmul(A, net.W2[blk], out=B)
+            np.matmul(B.T, A, out=G)
+            np.matmul(B, net.W1[blk], out=A)
+
+    return best_time(run, repeats)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="fewer repeats, fewer torch variants")
+    ap.add_argument("--no-torch", action="store_true", help="skip the PyTorch column")
+    args = ap.parse_args(argv)
+    repeats = 2 if args.quick else 3
+    import _torch_reference as tref
+    use_torch = tref.available() and not args.no_torch
+    if use_torch:
+        import torch
+        torch.set_num_threads(os.cpu_count() or 1)
+    g = np.random.default_rng(0)
+    n_jet, n_train = 4096, 2048
+    print(f"sns_np engine benchmark: width 256, depth 8, {os.cpu_count()} cores; "
+          f"torch {'present' if use_torch else 'absent (column skipped)'}")
+    for dtype in (np.float64, np.float32):
+        dt = np.dtype(dtype)
+        net = ResidualMLP(seed=0, dtype=dtype)
+        net.W3[...] = g.standard_normal(net.W3.shape) / 16  # an O(1) map, as after fitting
+        x = g.standard_normal((n_jet, 3))
+        x /= np.linalg.norm(x, axis=1, keepdims=True)
+        print(f"\n== {dt.name}")
+        t_mm = matmul_products_time(net, n_jet * 10, dtype, repeats)
+        flops = 2 * net.depth * 2 * (n_jet * 10) * 256 * 256
+        print(f"matrix-product rate (rows {n_jet * 10} x 256 x 256): "
+              f"{flops / t_mm / 1e9:.1f} GFLOP/s")
+        for order, S in ((0, 1), (1, 4)):
+            t = best_time(lambda order=order: net.jet(x, order), repeats)
+            t_ref = matmul_products_time(net, n_jet * S, dtype, repeats)
+            print(f"jet(order={order}) {n_jet} points: {t * 1e3:8.1f} ms   products alone "
+                  f"{t_ref * 1e3:7.1f} ms   efficiency {t_ref / t:.2f}")
+        t_jet = best_time(lambda: net.jet(x, 2), repeats)
+        print(f"jet(order=2) {n_jet} points: {t_jet * 1e3:8.1f} ms   products alone "
+              f"{t_mm * 1e3:7.1f} ms   efficiency {t_mm / t_jet:.2f}   (target >= 0.80)")
+        R = sphere_frame(x)
+        D = np.concatenate([R, x[:, :, None]], axis=2)
+        t_dir = best_time(lambda: net.jet(x, 2, directions=D, second=2), repeats)
+        print(f"jet(order=2, [e_u, e_v, p], second=2) (7 streams, geometry): "
+              f"{t_dir * 1e3:8.1f} ms   ({t_jet / t_dir:.2f}x faster than the full jet)")
+        if use_torch:
+            tt = tref.full_hessian_times(net, x, dt, repeats=1 if args.quick else 2,
+                                         chunks=(256,) if args.quick else (128, 256, 512))
+            name = min(tt, key=tt.get)
+            print(f"PyTorch fastest full Hessian: {tt[name] * 1e3:8.1f} ms ({name})   "
+                  f"speed-up {tt[name] / t_jet:.2f}x   (target >= 2.5x)")
+
+        # one training step at 2048 points
+        p = g.standard_normal((n_train, 3))
+        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        R = sphere_frame(p)
+        q = (p * np.array([1.0, 1.3, 0.7])).astype(dtype)
+        nt = p / np.array([1.0, 1.3, 0.7])
+        nt = (nt / np.linalg.norm(nt, axis=1, keepdims=True)).astype(dtype)
+
+        def step():
+            def loss(y, JD, sl):
+                val, dy, dJD, _ = position_normal_loss(y, JD, q[sl], nt[sl], n_train, 1e-4)
+                return val, dy, dJD
+            return net.value_and_grad(p, loss, order=1, directions=R)
+
+        t_step = best_time(step, repeats)
+        t_mm_train = training_matmul_time(net, n_train, 3, dtype, repeats)
+        print(f"training step {n_train} points: {t_step * 1e3:8.1f} ms   products alone "
+              f"{t_mm_train * 1e3:7.1f} ms   efficiency {t_mm_train / t_step:.2f}")
+        if use_torch:
+            tt = tref.training_step_times(net, p, R, q, nt, dt, repeats=repeats)
+            name = min(tt, key=tt.get)
+            target = 1.3 if dt == np.float32 else 1.0
+            print(f"PyTorch fastest training step: {tt[name] * 1e3:8.1f} ms ({name})   "
+                  f"speed-up {tt[name] / t_step:.2f}x   (target >= {target}x)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,462 @@
+"""Fitting a SphericalNeuralSurface to a mesh or an analytic surface (paper, section 3.1).
+
+The network is trained in a normalised frame (surface centred at its area centroid and scaled
+to area 4 pi) on fresh random samples every step:
+
+    L = 1/N sum |net(p_i) - q_i|^2 + w_n 1/N sum |n(p_i) - n_i|^2
+
+where q_i is the target point that corresponds to the sphere point p_i and n_i the target's
+unit normal. The two tangent derivatives that the normal needs come from a 3-stream
+directional jet (value, d/de_u, d/de_v) and the gradient from the engine's reverse mode.
+
+Training runs in float32 by default (about twice as fast on a CPU; see docs/fitting.md for the
+measured accuracy), and the returned surface is converted to float64 for evaluation.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from .._progress import Progress
+from .._validation import as_generator, check_choice, check_positive_float, check_positive_int
+from ..errors import DivergenceError, ModelFileError
+from ..geometry import tangent_frame
+from ..nn.mlp import ResidualMLP, load_npz, save_npz
+from ..nn.optim import Schedule, make_optimizer
+from .losses import normals_from_tangents, position_normal_loss
+from .model import SphericalNeuralSurface
+
+__all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "DEFAULTS"]
+
+#: default fitting options (docs/fitting.md explains and measures each choice)
+DEFAULTS = dict(
+    width=256, depth=8, steps=3000, batch=2048, lr=1e-3, lr_min=1e-5, optimizer="adam",
+    schedule="cosine", warmup=50, normal_weight=1e-4, dtype="float32", init="ridge",
+    time_budget=None, tol=None, n_eval=20000, seed=0,
+)
+
+
+@dataclass
+class FitReport:
+    """What a fit did and how well it fits held-out points (in the input's units)."""
+
+    steps: int = 0
+    seconds: float = 0.0
+    stopped: str = ""
+    final_loss: float = float("nan")
+    #: held-out position error |S(p) - q| (mean, RMS, max) and relative to the bbox diagonal
+    position_mean: float = float("nan")
+    position_rms: float = float("nan")
+    position_max: float = float("nan")
+    bbox_diagonal: float = float("nan")
+    #: held-out angle between the surface normal and the target normal, degrees
+    normal_mean_deg: float = float("nan")
+    normal_max_deg: float = float("nan")
+    history: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+
+    @property
+    def position_relative(self) -> float:
+        return self.position_mean / self.bbox_diagonal
+
+    def summary(self) -> str:
+        return (f"{self.steps} steps in {self.seconds:.1f} s ({self.stopped}); held-out "
+                f"position error mean {self.position_mean:.3g} (= {self.position_relative:.2e}"
+                f" of the bbox diagonal), RMS {self.position_rms:.3g}, max "
+                f"{self.position_max:.3g}; normal error mean {self.normal_mean_deg:.3f} deg, max "
+                f"{self.normal_max_deg:.2f} deg")
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["history"] = {k: list(map(float, v)) for k, v in self.history.items()}
+        d["position_relative"] = self.position_relative
+        return d
+
+
+# ------------------------------------------------------------------------------ targets
+
+class _MeshTarget:
+    """Samples of a mesh and its spherical embedding, in the normalised frame."""
+
+    def __init__(self, V, F, Vs=None, check=True, verbose=True):
+        from .. import mesh as M
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F)
+        if check:
+            M.check(V, F)
+        if Vs is None:
+            Vs = M.spherical_embedding(V, F, verbose=verbose)[0]
+        self.corr = M.Correspondence(V, F, Vs)
+        A = M.face_areas(V, F)
+        self.area = float(A.sum())
+        self.center = (A[:, None] * V[F].mean(axis=1)).sum(axis=0) / self.area
+        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
+        self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        self.fingerprint = _fingerprint(V, F)
+
+    def sample(self, n, rng):
+        p, q, nrm = self.corr.sample(n, rng)
+        return p, (q - self.center) / self.scale, nrm
+
+    def evaluate_at(self, p):
+        q, nrm = self.corr.mesh_point(p)
+        return (q - self.center) / self.scale, nrm
+
+
+class _ShapeTarget:
+    """Samples of an analytic surface map S(p), uniform on the parameter sphere."""
+
+    def __init__(self, shape):
+        from ..protocol import surface_jet
+        from ..quadrature import sphere_quadrature
+        self.shape = shape
+        P, w = sphere_quadrature(96)
+        y, J = surface_jet(shape, P, 1)
+        JR = np.einsum("kia,kab->kib", J, tangent_frame(P))
+        dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1) * w
+        self.area = float(dA.sum())
+        self.center = (dA[:, None] * y).sum(axis=0) / self.area
+        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
+        self.bbox_diagonal = float(np.linalg.norm(y.max(axis=0) - y.min(axis=0)))
+        self.fingerprint = f"shape:{type(shape).__name__}:{_fingerprint(y[:64], None)}"
+
+    def sample(self, n, rng):
+        p = rng.standard_normal((n, 3))
+        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        q, nrm = self.evaluate_at(p)
+        return p, q, nrm
+
+    def evaluate_at(self, p):
+        from ..protocol import surface_jet
+        y, J = surface_jet(self.shape, p, 1)
+        JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
+        nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1])
+        return (y - self.center) / self.scale, nrm
+
+
+def _fingerprint(V, F):
+    h = hashlib.sha256(np.ascontiguousarray(V, dtype=np.float64).tobytes())
+    if F is not None:
+        h.update(np.ascontiguousarray(F, dtype=np.int64).tobytes())
+    return h.hexdigest()[:16]
+
+
+# ------------------------------------------------------------------------------ public API
+
+def fit_mesh(V, F, *, Vs=None, check=True, **options):
+    """Fit a SphericalNeuralSurface to a closed genus-0 triangle mesh.
+
+    Parameters
+    ----------
+    V : (n, 3) float array, vertex positions
+    F : (m, 3) int array, triangles
+    Vs : (n, 3) float array, optional
+        A spherical embedding of V (unit vectors, fold-free); computed with
+        :func:`sns_np.mesh.spherical_embedding` when omitted.
+    check : bool
+        Run :func:`sns_np.mesh.check` first (raises a specific MeshError on defects).
+    **options
+        See :func:`fit_sampler` (steps, batch, lr, time_budget, checkpoint, ...).
+
+    Returns
+    -------
+    surface : SphericalNeuralSurface, in the mesh's units, float64
+    report : FitReport (held-out errors against the mesh)
+    """
+    target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True))
+    meta = {"source": options.pop("source", "mesh"), "n_vertices": int(len(V)),
+            "n_faces": int(len(F)), "area": target.area}
+    return fit_sampler(target, metadata=meta, **options)
+
+
+def fit_shape(shape, **options):
+    """Fit a SphericalNeuralSurface directly to an analytic surface map (as the paper does).
+
+    Sphere points are drawn uniformly; targets are ``shape(p)`` and its exact normals.
+    Options as :func:`fit_sampler`. Returns (surface, report).
+    """
+    target = _ShapeTarget(shape)
+    meta = {"source": options.pop("source", f"shape:{type(shape).__name__}"),
+            "area": target.area}
+    return fit_sampler(target, metadata=meta, **options)
+
+
+def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, steps=None,
+                batch=None, lr=None, lr_min=None, optimizer=None, schedule=None, warmup=None,
+                normal_weight=None, dtype=None, init=None, time_budget=None, tol=None,
+                n_eval=None, seed=None, checkpoint=None, checkpoint_every=500, resume=False,
+                progress=True, callback=None, history_every=50):
+    """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
+
+    Parameters
+    ----------
+    target : object with ``sample(n, rng) -> (p, q, normals)`` and ``evaluate_at(p) -> (q,
+        normals)`` in the normalised frame, and attributes ``center``, ``scale``,
+        ``bbox_diagonal``, ``fingerprint``
+    net : ResidualMLP, optional
+        Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
+    width, depth : int
+        Architecture of a fresh network (default 256 x 8, the reference's).
+    steps : int
+        Step budget (default 3000).
+    batch : int
+        Fresh samples per step (default 2048, the reference's).
+    lr, lr_min, schedule, warmup, optimizer
+        Adam by default, cosine decay from ``lr`` = 1e-3 to ``lr_min`` = 1e-5 over ``steps``
+        with a linear warm-up; ``optimizer="rmsprop"`` with ``lr=1e-4`` reproduces the
+        reference's settings.
+    normal_weight : float
+        Weight of the normal term (default 1e-4, the reference's).
+    dtype : {"float32", "float64"}
+        Training precision (default float32; the result is float64).
+    init : {"ridge", "random"}
+        "ridge" (default) sets the output layer of a fresh network by regularised least squares
+        on its initial features, so training starts from the best linear read-out instead of a
+        point (see docs/fitting.md for the measured effect).
+    time_budget : float, seconds, optional
+        Stop when exceeded (checked every step).
+    tol : float, optional
+        Stop when the running RMS position error, relative to the normalised size (the
+        surface has area 4 pi), falls below ``tol``.
+    n_eval : int
+        Held-out sphere points for the report (default 20,000; fixed seed, not used in
+        training).
+    seed : int or Generator
+        Seed of initialisation and sampling (default 0).
+    checkpoint : path, optional
+        .npz file written atomically every ``checkpoint_every`` steps, on interruption
+        (KeyboardInterrupt) and at the end; with ``resume=True`` an existing checkpoint for the
+        same target and options is continued from its step.
+    progress : bool
+        Show a progress line on stderr.
+    callback : callable ``callback(step, info) -> bool``, optional
+        Called every ``history_every`` steps with a dict of current figures; returning True
+        stops the fit.
+
+    Returns
+    -------
+    (SphericalNeuralSurface, FitReport)
+    """
+    o = dict(DEFAULTS)
+    given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
+                 optimizer=optimizer, schedule=schedule, warmup=warmup,
+                 normal_weight=normal_weight, dtype=dtype, init=init, time_budget=time_budget,
+                 tol=tol, n_eval=n_eval, seed=seed)
+    o.update({k: v for k, v in given.items() if v is not None})
+    _check_options(o)
+    t_dtype = np.dtype(o["dtype"])
+    rng = as_generator(o["seed"])
+    key = _resume_key(target, o, net)
+
+    state = None
+    if checkpoint is not None and resume and os.path.exists(checkpoint):
+        state = _load_checkpoint(checkpoint, key)
+    if state is not None:
+        net = state["net"].astype(t_dtype)
+        rng.bit_generator.state = state["rng"]
+        start, history, elapsed0 = state["step"], state["history"], state["seconds"]
+    else:
+        if net is None:
+            net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype)
+            if o["init"] == "ridge":
+                _ridge_readout(net, target, rng)
+        else:
+            net = net.astype(t_dtype)
+        start, history, elapsed0 = 0, {k: [] for k in ("step", "loss", "position_rms",
+                                                      "normal_deg", "lr", "seconds")}, 0.0
+    opt = make_optimizer(o["optimizer"], _schedule(o))
+    if state is not None:
+        opt.load_state_dict(state["opt"])
+
+    total = o["steps"]
+    bar = Progress(total, "fit", enabled=progress)
+    t0 = time.perf_counter() - elapsed0
+    w = o["normal_weight"]
+    order = 1 if w else 0
+    ema_pos = ema_nrm = None
+    stopped = "step budget"
+    step = start
+    last_loss = float("nan")
+
+    def write_checkpoint():
+        if checkpoint is not None:
+            _save_checkpoint(checkpoint, net, opt, rng, step, history, time.perf_counter() - t0,
+                             key, target, metadata)
+
+    try:
+        while step < total:
+            p, q, nt = target.sample(o["batch"], rng)
+            R = tangent_frame(p) if order else None
+            pc = p.astype(t_dtype)
+            qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
+            parts = {"position": 0.0, "normal": 0.0}
+
+            def loss_fn(y, JD, sl):
+                val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p), w)
+                parts["position"] += pr["position"]
+                parts["normal"] += pr["normal"]
+                return val, dy, dJD
+
+            loss, grad = net.value_and_grad(pc, loss_fn, order=order,
+                                            directions=None if R is None else R.astype(t_dtype))
+            if not np.isfinite(loss) or not np.all(np.isfinite(grad)):
+                stopped = "diverged"
+                raise DivergenceError(
+                    f"fit diverged at step {step} (loss {loss}); the parameters of the last "
+                    f"good step are kept" + (f" in {checkpoint}" if checkpoint else ""))
+            lr_now = opt.lr()
+            opt.step(net.theta, grad)
+            step += 1
+            last_loss = loss
+            pos_ms = parts["position"] / len(p)
+            nrm_ms = parts["normal"] / len(p)
+            ema_pos = pos_ms if ema_pos is None else 0.95 * ema_pos + 0.05 * pos_ms
+            ema_nrm = nrm_ms if ema_nrm is None else 0.95 * ema_nrm + 0.05 * nrm_ms
+            pos_rms = float(np.sqrt(ema_pos))
+            # |n - n_t|^2 = 2 - 2 cos(angle)  ->  angle = 2 asin(|n - n_t| / 2)
+            nrm_deg = float(np.degrees(2 * np.arcsin(min(1.0, np.sqrt(ema_nrm) / 2))))
+            elapsed = time.perf_counter() - t0
+            if step % history_every == 0 or step == total:
+                for k, v in (("step", step), ("loss", loss), ("position_rms", pos_rms),
+                             ("normal_deg", nrm_deg), ("lr", lr_now), ("seconds", elapsed)):
+                    history[k].append(float(v))
+                if callback is not None and callback(step, {
+                        "loss": loss, "position_rms": pos_rms, "normal_deg": nrm_deg,
+                        "lr": lr_now, "seconds": elapsed, "net": net}):
+                    stopped = "callback"
+                    break
+            bar.update(step, loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}", nrm=f"{nrm_deg:.2f}deg")
+            if checkpoint is not None and step % checkpoint_every == 0:
+                write_checkpoint()
+            if o["tol"] is not None and step >= 20 and pos_rms < o["tol"]:
+                stopped = "tolerance"
+                break
+            if o["time_budget"] is not None and elapsed >= o["time_budget"]:
+                stopped = "time budget"
+                break
+    except KeyboardInterrupt:
+        write_checkpoint()
+        bar.close()
+        raise
+    except DivergenceError:
+        bar.close()
+        raise
+    bar.close(step, loss=f"{last_loss:.2e}")
+    seconds = time.perf_counter() - t0
+    write_checkpoint()
+
+    surface = SphericalNeuralSurface(net.astype(np.float64), center=target.center,
+                                     scale=target.scale, metadata=dict(metadata or {}))
+    report = _evaluate(surface, target, o["n_eval"])
+    report.steps, report.seconds, report.stopped = step, seconds, stopped
+    report.final_loss = float(last_loss)
+    report.history = {k: np.asarray(v) for k, v in history.items()}
+    report.options = {k: v for k, v in o.items()}
+    surface.metadata.update(fit=report.to_json())
+    return surface, report
+
+
+# ------------------------------------------------------------------------------ internals
+
+def _check_options(o):
+    check_positive_int(o["width"], "width")
+    check_positive_int(o["depth"], "depth", minimum=0)
+    check_positive_int(o["steps"], "steps")
+    check_positive_int(o["batch"], "batch")
+    check_positive_int(o["n_eval"], "n_eval")
+    check_positive_int(o["warmup"], "warmup", minimum=0)
+    check_positive_float(o["lr"], "lr")
+    check_positive_float(o["lr_min"], "lr_min", allow_zero=True)
+    check_positive_float(o["normal_weight"], "normal_weight", allow_zero=True)
+    check_choice(o["optimizer"], "optimizer", {"adam", "rmsprop", "sgd"})
+    check_choice(o["schedule"], "schedule", {"constant", "cosine"})
+    check_choice(o["dtype"], "dtype", {"float32", "float64"})
+    check_choice(o["init"], "init", {"ridge", "random"})
+    if o["time_budget"] is not None:
+        check_positive_float(o["time_budget"], "time_budget")
+    if o["tol"] is not None:
+        check_positive_float(o["tol"], "tol")
+
+
+def _schedule(o):
+    if o["schedule"] == "constant":
+        return Schedule("constant", o["lr"], warmup=o["warmup"])
+    return Schedule("cosine", o["lr"], total=o["steps"], lr_min=o["lr_min"], warmup=o["warmup"])
+
+
+def _ridge_readout(net, target, rng, n=8192, rel_reg=1e-6):
+    """Set W3 (and b3) to the regularised least-squares read-out of the initial features."""
+    p, q, _ = target.sample(n, rng)
+    H = net.features(p).astype(np.float64)
+    if net.bias:
+        H = np.hstack([H, np.ones((n, 1))])
+    G = H.T @ H
+    G[np.diag_indices_from(G)] += rel_reg * np.trace(G) / G.shape[0]
+    Wt = np.linalg.solve(G, H.T @ q)
+    net.W3[...] = Wt[:net.width].T
+    if net.bias:
+        net.b3[...] = Wt[net.width]
+
+
+def _evaluate(surface, target, n_eval):
+    """Held-out errors at n_eval fixed sphere points (seeded apart from training)."""
+    g = np.random.default_rng(2**31 - 1)
+    p = g.standard_normal((n_eval, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    q, nt = target.evaluate_at(p)
+    q = target.center + target.scale * q
+    y, J = surface.jet(p, 1)
+    JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
+    n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1])
+    err = np.linalg.norm(y - q, axis=1)
+    ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nt), -1.0, 1.0)))
+    return FitReport(position_mean=float(err.mean()), position_rms=float(np.sqrt((err ** 2)
+                     .mean())), position_max=float(err.max()),
+                     bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(ang.mean()),
+                     normal_max_deg=float(ang.max()))
+
+
+def _resume_key(target, o, net):
+    keep = {k: o[k] for k in ("width", "depth", "steps", "batch", "lr", "lr_min", "optimizer",
+                              "schedule", "warmup", "normal_weight", "dtype", "init")}
+    keep["seed"] = o["seed"] if isinstance(o["seed"], (int, np.integer)) else "generator"
+    keep["target"] = target.fingerprint
+    keep["warm_start"] = None if net is None else _fingerprint(net.theta, None)
+    return json.dumps(keep, sort_keys=True, default=str)
+
+
+def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata):
+    surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
+                                     metadata=dict(metadata or {}))
+    arrays = surface.state()
+    arrays.update({f"opt.{k}": v for k, v in opt.state_dict().items()})
+    arrays.update({
+        "checkpoint.step": np.array(step), "checkpoint.seconds": np.array(seconds),
+        "checkpoint.key": np.array(key),
+        "checkpoint.rng": np.array(json.dumps(rng.bit_generator.state)),
+    })
+    arrays.update({f"checkpoint.history.{k}": np.asarray(v) for k, v in history.items()})
+    save_npz(path, arrays)
+
+
+def _load_checkpoint(path, key):
+    with load_npz(path) as data:
+        if "checkpoint.key" not in data:
+            raise ModelFileError(f"{path} is not a fit checkpoint (no checkpoint fields)")
+        if str(data["checkpoint.key"]) != key:
+            raise ModelFileError(
+                f"{path} is a checkpoint of a different fit (other target or options); "
+                f"delete it or pass another checkpoint path")
+        surface = SphericalNeuralSurface.from_state(data, source=str(path))
+        opt = {k[4:]: data[k] for k in data.files if k.startswith("opt.")}
+        history = {k[len("checkpoint.history."):]: list(data[k]) for k in data.files
+                   if k.startswith("checkpoint.history.")}
+        return {"net": surface.net, "opt": opt, "step": int(data["checkpoint.step"]),
+                "seconds": float(data["checkpoint.seconds"]), "history": history,
+                "rng": json.loads(str(data["checkpoint.rng"]))}

@@ -1,0 +1,84 @@
+"""Fitting losses and their cotangents (the inputs of the engine's reverse mode).
+
+A loss over sample points reduces to per-point cotangents of the network value ``y`` and of
+its derivatives ``JD`` along the sphere's tangent directions; ``ResidualMLP.value_and_grad``
+turns those into parameter gradients.
+
+Position + normal loss (paper, section 3.1):
+
+    L = 1/N sum |S(p_i) - q_i|^2 + lambda 1/N sum |n(p_i) - n_i|^2
+    n = c / |c|,  c = S_u x S_v,  S_u = J e_u, S_v = J e_v
+
+Cotangents, with g = dL/dc:
+
+    dL/dy   = 2 (y - q) / N
+    dL/dn   = 2 lambda (n - n_i) / N
+    g       = (I - n n^T) dL/dn / |c|         (derivative of c -> c / |c|)
+    dL/dS_u = S_v x g,   dL/dS_v = g x S_u     (from d(S_u x S_v) . g)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["normals_from_tangents", "position_normal_loss"]
+
+
+def normals_from_tangents(Su, Sv):
+    """Unit normals n = (S_u x S_v) / |S_u x S_v| and the norms |S_u x S_v|.
+
+    Parameters
+    ----------
+    Su, Sv : (n, 3) float arrays
+
+    Returns
+    -------
+    n : (n, 3) float array
+    norm : (n,) float array
+    """
+    c = np.cross(Su, Sv)
+    norm = np.linalg.norm(c, axis=1)
+    return c / np.maximum(norm, np.finfo(c.dtype).tiny)[:, None], norm
+
+
+def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0):
+    """Position + normal loss on one chunk and its cotangents.
+
+    Parameters
+    ----------
+    y : (c, 3) float array, network values at the chunk's sphere points
+    JD : (c, 3, 2) float array, derivatives along e_u, e_v (``None`` when normal_weight is 0)
+    q : (c, 3) float array, target positions
+    normals : (c, 3) float array, unit target normals (ignored when normal_weight is 0)
+    n_total : int, the number N of points in the whole batch (the mean's denominator)
+    normal_weight : float, lambda
+    scale : float, the surface is ``scale * y`` (an output transform); positions are compared
+        after it, normals are scale-invariant
+
+    Returns
+    -------
+    loss : float (this chunk's contribution)
+    dy : (c, 3) float array
+    dJD : (c, 3, 2) float array or None
+    parts : dict with the chunk's summed squared position and normal errors
+    """
+    r = scale * y - q
+    sq_pos = float(np.einsum("ij,ij->", r, r))
+    dy = (2.0 * scale / n_total) * r
+    loss = sq_pos / n_total
+    parts = {"position": sq_pos, "normal": 0.0}
+    if not normal_weight:
+        return loss, dy, None, parts
+    Su, Sv = JD[:, :, 0], JD[:, :, 1]
+    n, norm = normals_from_tangents(Su, Sv)
+    dn = n - normals
+    sq_nrm = float(np.einsum("ij,ij->", dn, dn))
+    loss += normal_weight * sq_nrm / n_total
+    parts["normal"] = sq_nrm
+    gn = (2.0 * normal_weight / n_total) * dn
+    g = (gn - np.einsum("ij,ij->i", n, gn)[:, None] * n) / np.maximum(
+        norm, np.finfo(norm.dtype).tiny)[:, None]
+    dJD = np.empty_like(JD)
+    dJD[:, :, 0] = np.cross(Sv, g)
+    dJD[:, :, 1] = np.cross(g, Su)
+    return loss, dy, dJD, parts

@@ -1,0 +1,197 @@
+"""The SphericalNeuralSurface: a residual network plus its output transform.
+
+    S(p) = c + s * net(p)
+
+``net`` is a :class:`~sns_np.nn.ResidualMLP` fitted in a normalised frame (the surface centred
+at the origin and scaled to area 4 pi, as in the paper); the centre ``c`` and scale ``s`` map
+its output back to the units of the input mesh, so positions, curvatures and areas are reported
+in those units. The object is a surface map (DESIGN.md): ``jet(p, order)`` with ambient
+derivatives, plus the directional jets that geometry code uses to propagate 7 streams instead
+of 10.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from .._validation import as_points, check_order
+from ..errors import ModelFileError
+from ..nn.mlp import ResidualMLP, load_npz, save_npz
+
+__all__ = ["SphericalNeuralSurface"]
+
+FORMAT = "sns_np.SphericalNeuralSurface"
+FORMAT_VERSION = 1
+
+
+class SphericalNeuralSurface:
+    """A genus-0 surface encoded by a network restricted to the unit sphere.
+
+    Parameters
+    ----------
+    net : ResidualMLP with in_dim = out_dim = 3
+    center : (3,) float array, the output translation c
+    scale : float, the output scale s > 0
+    metadata : dict, optional
+        JSON-serialisable information kept with the model (source, fit options, report).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sns_np.nn import ResidualMLP
+    >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+    >>> y, J = S.jet(np.array([[0.0, 0.0, 1.0]]), 1)
+    >>> J.shape
+    (1, 3, 3)
+
+    Fitting, the usual way to make one::
+
+        S = SphericalNeuralSurface.fit(V, F)          # a closed genus-0 mesh
+        S = SphericalNeuralSurface.fit_shape(shape)   # an analytic surface map
+    """
+
+    def __init__(self, net: ResidualMLP, center=(0.0, 0.0, 0.0), scale=1.0, metadata=None):
+        if not isinstance(net, ResidualMLP):
+            raise TypeError(f"net must be a ResidualMLP, got {type(net).__name__}")
+        if net.in_dim != 3 or net.out_dim != 3:
+            raise ValueError(f"a surface network maps R^3 -> R^3; got in_dim={net.in_dim}, "
+                             f"out_dim={net.out_dim}")
+        center = np.asarray(center, dtype=np.float64)
+        if center.shape != (3,) or not np.all(np.isfinite(center)):
+            raise ValueError(f"center must be 3 finite numbers, got {center!r}")
+        scale = float(scale)
+        if not np.isfinite(scale) or scale <= 0:
+            raise ValueError(f"scale must be finite and > 0, got {scale}")
+        self.net = net
+        self.center = center
+        self.scale = scale
+        self.metadata = dict(metadata or {})
+
+    # ------------------------------------------------------------------ the surface map
+    def jet(self, p, order=0, directions=None, second=None):
+        """Value and ambient derivatives of S = c + s net, in the input's units.
+
+        Parameters and returns as :meth:`ResidualMLP.jet` (surface-map protocol), in float64.
+        """
+        order = check_order(order)
+        p = as_points(p, "p")
+        out = self.net.jet(p, order, directions=directions, second=second)
+        if order == 0:
+            return self.center + self.scale * out.astype(np.float64, copy=False)
+        y = self.center + self.scale * out[0].astype(np.float64, copy=False)
+        rest = tuple(self.scale * a.astype(np.float64, copy=False) for a in out[1:])
+        return (y,) + rest
+
+    def __call__(self, p):
+        """Surface points S(p) (n, 3) for sphere points p (n, 3)."""
+        return self.jet(p, 0)
+
+    @property
+    def n_params(self) -> int:
+        return self.net.n_params
+
+    def __repr__(self):
+        src = self.metadata.get("source", "")
+        src = f", source={src!r}" if src else ""
+        return (f"SphericalNeuralSurface(width={self.net.width}, depth={self.net.depth}, "
+                f"scale={self.scale:.6g}{src})")
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def fit(cls, V, F, **options):
+        """Fit a surface to a closed genus-0 triangle mesh; see :func:`sns_np.surface.fit_mesh`."""
+        from .fit import fit_mesh
+        return fit_mesh(V, F, **options)
+
+    @classmethod
+    def fit_shape(cls, shape, **options):
+        """Fit a surface to an analytic surface map; see :func:`sns_np.surface.fit_shape`."""
+        from .fit import fit_shape
+        return fit_shape(shape, **options)
+
+    @classmethod
+    def fit_sdf(cls, sdf, **options):
+        """Fit a surface to the zero set of a signed distance function (sns_np.flows)."""
+        from ..flows import fit_sdf
+        return fit_sdf(sdf, **options)
+
+    # ------------------------------------------------------------------ output
+    def to_mesh(self, level: int = 5, fields: bool = True):
+        """Evaluate the surface on an icosphere.
+
+        Parameters
+        ----------
+        level : int, icosphere subdivision level (level 5: 10,242 vertices; 6: 40,962)
+        fields : bool, also compute per-vertex differential quantities
+
+        Returns
+        -------
+        V : (n, 3) float array, surface points S(p) at the icosphere vertices p
+        F : (m, 3) int array, faces (oriented outward when S preserves orientation)
+        data : dict of per-vertex arrays: ``sphere`` (n, 3) and, with ``fields``, ``normal``
+            (n, 3), ``H``, ``K``, ``kmin``, ``kmax``, ``area_element`` (n,), ``dmin``, ``dmax``
+            (n, 3)
+        """
+        from ..mesh import icosphere
+        P, F = icosphere(level)
+        data = {"sphere": P}
+        if not fields:
+            return self.jet(P, 0), F, data
+        from ..geometry import differential_quantities
+        dq = differential_quantities(self, P, on_degenerate="nan")
+        data.update(normal=dq.n, H=dq.H, K=dq.K, kmin=dq.kmin, kmax=dq.kmax,
+                    area_element=dq.area_element, dmin=dq.dmin, dmax=dq.dmax)
+        return dq.x, F, data
+
+    # ------------------------------------------------------------------ files
+    def state(self) -> dict:
+        out = {
+            "format": np.array(FORMAT), "format_version": np.array(FORMAT_VERSION),
+            "center": self.center, "scale": np.array(self.scale),
+            "metadata": np.array(json.dumps(self.metadata, default=_json_default)),
+        }
+        out.update(self.net.state(prefix="net."))
+        return out
+
+    @classmethod
+    def from_state(cls, data, source="state"):
+        if "format" not in data:
+            raise ModelFileError(f"{source}: missing field 'format'; not an sns_np model file")
+        fmt = str(data["format"])
+        if fmt != FORMAT:
+            hint = " (a bare network: use ResidualMLP.load)" if fmt == "sns_np.ResidualMLP" else ""
+            raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}{hint}")
+        version = int(data["format_version"]) if "format_version" in data else -1
+        if version != FORMAT_VERSION:
+            raise ModelFileError(f"{source}: model format version {version} is not supported "
+                                 f"(this sns_np reads version {FORMAT_VERSION})")
+        for key in ("center", "scale", "metadata"):
+            if key not in data:
+                raise ModelFileError(f"{source}: missing field {key!r}")
+        net = ResidualMLP.from_state(data, prefix="net.", source=source)
+        try:
+            metadata = json.loads(str(data["metadata"]))
+            return cls(net, center=np.asarray(data["center"], dtype=np.float64),
+                       scale=float(data["scale"]), metadata=metadata)
+        except (ValueError, TypeError) as exc:
+            raise ModelFileError(f"{source}: invalid transform or metadata ({exc})") from None
+
+    def save(self, path):
+        """Write the model to ``path`` (.npz, no pickles), atomically."""
+        return save_npz(path, self.state())
+
+    @classmethod
+    def load(cls, path) -> SphericalNeuralSurface:
+        """Read a model written by :meth:`save` (or a fit checkpoint); never unpickles."""
+        with load_npz(path) as data:
+            return cls.from_state(data, source=str(path))
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)

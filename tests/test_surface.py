@@ -1,0 +1,145 @@
+"""SphericalNeuralSurface: the map, its files, the fitting loop, checkpoints and resumption."""
+
+import numpy as np
+import pytest
+
+from sns_np.errors import DivergenceError, ModelFileError
+from sns_np.nn import ResidualMLP
+from sns_np.shapes import Ellipsoid
+from sns_np.surface import SphericalNeuralSurface, fit_shape, position_normal_loss
+from sns_np.testing import check_directional_jet, check_jet
+
+from .conftest import sphere_points
+
+TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False)
+
+
+def make_surface(seed=0):
+    net = ResidualMLP(width=12, depth=2, seed=seed)
+    net.W3[...] = np.random.default_rng(seed).standard_normal(net.W3.shape) / 4
+    return SphericalNeuralSurface(net, center=[1.0, -2.0, 0.5], scale=3.0, metadata={"a": 1})
+
+
+def test_output_transform_and_jets():
+    S = make_surface()
+    p = sphere_points(30)
+    y, J, D2 = S.jet(p, 2)
+    yn, Jn, D2n = S.net.jet(p, 2)
+    assert np.allclose(y, [1.0, -2.0, 0.5] + 3.0 * yn)
+    assert np.allclose(J, 3.0 * Jn) and np.allclose(D2, 3.0 * D2n)
+    err = check_jet(S, p, 2, h=1e-4, richardson=True)
+    assert err["J"] < 1e-7 and err["D2"] < 1e-7, err
+    D = np.random.default_rng(1).standard_normal((30, 3, 3))
+    err = check_directional_jet(S, p, D, 2, second=2, h=1e-4, richardson=True)
+    assert max(err.values()) < 1e-7, err
+
+
+def test_save_load_round_trip(tmp_path):
+    S = make_surface()
+    path = S.save(tmp_path / "m.npz")
+    T = SphericalNeuralSurface.load(path)
+    p = sphere_points(10)
+    for a, b in zip(S.jet(p, 2), T.jet(p, 2)):
+        assert np.array_equal(a, b)
+    assert T.metadata == {"a": 1} and np.array_equal(T.center, S.center)
+    S.net.save(tmp_path / "net.npz")
+    with pytest.raises(ModelFileError, match="bare network"):
+        SphericalNeuralSurface.load(tmp_path / "net.npz")
+    data = dict(np.load(path))
+    data["format_version"] = np.array(7)
+    np.savez(tmp_path / "v7.npz", **data)
+    with pytest.raises(ModelFileError, match="version 7"):
+        SphericalNeuralSurface.load(tmp_path / "v7.npz")
+
+
+def test_position_normal_loss_cotangents_by_differences():
+    g = np.random.default_rng(0)
+    y, JD = g.standard_normal((7, 3)), g.standard_normal((7, 3, 2))
+    q, nt = g.standard_normal((7, 3)), g.standard_normal((7, 3))
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+
+    def f(y_, JD_):
+        return position_normal_loss(y_, JD_, q, nt, 7, normal_weight=0.3)[0]
+
+    _, dy, dJD, _ = position_normal_loss(y, JD, q, nt, 7, normal_weight=0.3)
+    h = 1e-6
+    for idx in np.ndindex(*y.shape):
+        e = np.zeros_like(y)
+        e[idx] = h
+        assert np.isclose((f(y + e, JD) - f(y - e, JD)) / (2 * h), dy[idx], atol=1e-8)
+    for idx in np.ndindex(*JD.shape):
+        e = np.zeros_like(JD)
+        e[idx] = h
+        assert np.isclose((f(y, JD + e) - f(y, JD - e)) / (2 * h), dJD[idx], atol=1e-8)
+
+
+def test_fit_shape_reduces_error_and_reports_in_input_units():
+    E = Ellipsoid(2.0, 2.6, 1.4)  # twice the size of the issue's ellipsoid: units matter
+    _, r_random = fit_shape(E, steps=1, init="random", **TINY)
+    _, r_ridge = fit_shape(E, steps=1, **dict(TINY, width=24, depth=2))
+    S, r = fit_shape(E, steps=300, lr=3e-3, **dict(TINY, width=24, depth=2))
+    assert r_ridge.position_mean < 0.1 * r_random.position_mean  # the warm start helps
+    assert r.steps == 300 and r.stopped == "step budget"
+    assert r.position_mean < 0.6 * r_ridge.position_mean        # and training improves on it
+    p = sphere_points(200, seed=3)
+    assert np.mean(np.linalg.norm(S(p) - E.jet(p, 0), axis=1)) < 0.05  # in E's units
+    assert np.isclose(S.scale, np.sqrt(S.metadata["area"] / (4 * np.pi)))
+    assert S.net.dtype == np.float64 and len(r.history["loss"]) == 6
+
+
+def test_time_budget_tolerance_and_callback_stop():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    _, r = fit_shape(E, steps=10_000, time_budget=0.5, **TINY)
+    assert r.stopped == "time budget" and r.steps < 10_000
+    _, r = fit_shape(E, steps=10_000, tol=1.0, **TINY)
+    assert r.stopped == "tolerance" and r.steps == 20
+    _, r = fit_shape(E, steps=10_000, callback=lambda step, info: step >= 100, **TINY)
+    assert r.stopped == "callback" and r.steps == 100
+
+
+def test_checkpoint_resume_is_exact(tmp_path):
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    opts = dict(steps=40, dtype="float64", **TINY)
+    S_full, _ = fit_shape(E, **opts)
+    ck = tmp_path / "ck.npz"
+
+    def interrupt(step, info):
+        if step == 20:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_shape(E, checkpoint=ck, callback=interrupt, history_every=10, **opts)
+    assert ck.exists() and not list(tmp_path.glob("*.tmp"))
+    S_res, r = fit_shape(E, checkpoint=ck, resume=True, **opts)
+    assert r.steps == 40
+    assert np.array_equal(S_res.net.pack(), S_full.net.pack())
+    # a checkpoint of another fit is refused, not silently continued
+    with pytest.raises(ModelFileError, match="different fit"):
+        fit_shape(E, checkpoint=ck, resume=True, **dict(opts, steps=41))
+    # the checkpoint is also a loadable model
+    assert SphericalNeuralSurface.load(ck).net.n_params == S_res.net.n_params
+
+
+def test_divergence_stops_with_message():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+
+    def poison(step, info):
+        if step == 10:
+            info["net"].theta[0] = np.nan
+
+    with pytest.raises(DivergenceError, match="diverged at step 10"):
+        fit_shape(E, steps=50, callback=poison, history_every=10, **TINY)
+
+
+def test_bad_options():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    with pytest.raises(ValueError, match="unknown optimizer"):
+        fit_shape(E, optimizer="lbfgs", **TINY)
+    with pytest.raises(ValueError, match="steps must be"):
+        fit_shape(E, steps=0, **TINY)
+    with pytest.raises(ValueError, match="dtype"):
+        fit_shape(E, dtype="float16", **TINY)
+    with pytest.raises(ValueError, match="scale must be"):
+        SphericalNeuralSurface(ResidualMLP(width=4, depth=1), scale=-1)
+    with pytest.raises(ValueError, match="R\\^3 -> R\\^3"):
+        SphericalNeuralSurface(ResidualMLP(out_dim=1, width=4, depth=1))
