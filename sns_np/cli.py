@@ -1,15 +1,60 @@
 """The ``sns-np`` command.
 
-Each subcommand lives in a small function ``_cmd_<name>(args)``; errors in the input (files,
-options, meshes) are reported as one line on stderr with a non-zero exit status.
+Each subcommand is a function ``_cmd_<name>(args)``; errors in the input (files, options,
+meshes, models) are reported as one line on stderr with exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ._version import __version__
+
+
+def _positive_int(text):
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {v}")
+    return v
+
+
+def _positive_float(text):
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {v}")
+    return v
+
+
+def _add_fit_options(p):
+    g = p.add_argument_group("fitting options (defaults: docs/fitting.md)")
+    g.add_argument("--steps", type=_positive_int, help="step budget (default 3000)")
+    g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
+                   help="stop after this many seconds")
+    g.add_argument("--tol", type=_positive_float,
+                   help="stop when the running RMS position error (relative to the "
+                        "normalised size) is below this")
+    g.add_argument("--width", type=_positive_int, help="network width (default 256)")
+    g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
+    g.add_argument("--batch", type=_positive_int, help="samples per step (default 2048)")
+    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 1e-3)")
+    g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
+    g.add_argument("--normal-weight", type=float, help="weight of the normal loss (1e-4)")
+    g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
+    g.add_argument("--seed", type=int, help="random seed (default 0)")
+
+
+def _fit_kwargs(args):
+    keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
+            "normal_weight", "dtype", "seed")
+    return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -19,8 +64,167 @@ def build_parser() -> argparse.ArgumentParser:
         "network and compute their differential geometry without meshing.",
     )
     parser.add_argument("--version", action="version", version=f"sns-np {__version__}")
-    parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("demo", help="fit the built-in ellipsoid mesh and report its geometry",
+                       description="Fit a neural surface to a generated ellipsoid mesh "
+                       "(semi-axes 1, 1.3, 0.7; level-4 icosphere) and compare its normals and "
+                       "curvatures with the closed forms.")
+    p.add_argument("--level", type=int, default=4, help="icosphere level of the mesh (4)")
+    p.add_argument("-o", "--output", help="save the fitted model to this .npz")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_fit_options(p)
+    p.set_defaults(func=_cmd_demo)
+
+    p = sub.add_parser("embed", help="map a genus-0 mesh bijectively onto the unit sphere",
+                       description="Check a closed genus-0 mesh and compute a fold-free "
+                       "spherical embedding of its vertices; write it as a mesh.")
+    p.add_argument("mesh", help="input mesh (.obj, .off, .ply, .stl)")
+    p.add_argument("-o", "--output", required=True, help="output mesh (.obj, .ply, ...)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_embed)
+
+    p = sub.add_parser("fit", help="fit a neural surface to a mesh",
+                       description="Fit a SphericalNeuralSurface to a closed genus-0 mesh and "
+                       "save it as .npz. Interrupt with Ctrl-C and rerun with --resume to "
+                       "continue from the last checkpoint.")
+    p.add_argument("mesh", help="input mesh (.obj, .off, .ply, .stl)")
+    p.add_argument("-o", "--output", required=True, help="output model (.npz)")
+    p.add_argument("--checkpoint", help="checkpoint file (.npz; default OUTPUT.ckpt.npz)")
+    p.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_fit_options(p)
+    p.set_defaults(func=_cmd_fit)
+
+    p = sub.add_parser("eval", help="evaluate a model on an icosphere and write a mesh",
+                       description="Evaluate a fitted surface at the vertices of an icosphere "
+                       "and write the mesh with per-vertex normal, H, K, kmin, kmax and area "
+                       "element (PLY or VTU keep the fields; OBJ keeps geometry only).")
+    p.add_argument("model", help="fitted model (.npz)")
+    p.add_argument("-o", "--output", required=True, help="output mesh (.ply, .vtu, .obj)")
+    p.add_argument("--level", type=int, default=6, help="icosphere level (6: 40,962 vertices)")
+    p.set_defaults(func=_cmd_eval)
+
+    p = sub.add_parser("info", help="describe a model file")
+    p.add_argument("model", help="fitted model (.npz)")
+    p.set_defaults(func=_cmd_info)
+
+    p = sub.add_parser("eigen", help="Laplace-Beltrami eigenmodes of a model",
+                       description="Compute the lowest Laplace-Beltrami eigenvalues of a "
+                       "fitted surface and write the eigenfunctions as per-vertex fields.")
+    p.add_argument("model", help="fitted model (.npz)")
+    p.add_argument("-k", type=_positive_int, default=10, help="number of non-constant modes")
+    p.add_argument("-o", "--output", help="output mesh with the modes (.ply or .vtu)")
+    p.add_argument("--method", choices=["ritz", "neural"], default="ritz")
+    p.add_argument("--level", type=int, default=5, help="icosphere level of the output mesh")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=_cmd_eigen)
     return parser
+
+
+# ------------------------------------------------------------------------------ commands
+
+def _load_model(path):
+    from .surface import SphericalNeuralSurface
+    return SphericalNeuralSurface.load(path)
+
+
+def _check_output(path, suffixes):
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise ValueError(f"output {path.name!r} must end in one of {', '.join(suffixes)}")
+    if path.parent and not path.parent.exists():
+        raise ValueError(f"output folder {str(path.parent)!r} does not exist")
+    return path
+
+
+def _cmd_demo(args):
+    from .demo import run_demo
+    if args.output:
+        _check_output(args.output, (".npz",))
+    run_demo(level=args.level, out=args.output, progress=not args.quiet, **_fit_kwargs(args))
+    return 0
+
+
+def _cmd_embed(args):
+    from .mesh import check, load, spherical_embedding, write_mesh
+    out = _check_output(args.output, (".obj", ".ply", ".off", ".vtu", ".stl"))
+    V, F = load(args.mesh)
+    check(V, F)
+    Vs, report = spherical_embedding(V, F, verbose=not args.quiet)
+    write_mesh(out, Vs, F)
+    print(f"{args.mesh}: {len(V)} vertices embedded on the sphere; {report}")
+    print(f"wrote {out}")
+    return 0
+
+
+def _cmd_fit(args):
+    from .mesh import load
+    from .surface import fit_mesh
+    out = _check_output(args.output, (".npz",))
+    ckpt = Path(args.checkpoint) if args.checkpoint else out.with_suffix(".ckpt.npz")
+    if args.resume and not ckpt.exists():
+        raise ValueError(f"--resume: no checkpoint at {ckpt}")
+    V, F = load(args.mesh)
+    surface, report = fit_mesh(V, F, checkpoint=ckpt, resume=args.resume,
+                               progress=not args.quiet, source=str(args.mesh),
+                               **_fit_kwargs(args))
+    surface.save(out)
+    print(report.summary())
+    print(f"wrote {out} (checkpoint {ckpt})")
+    return 0
+
+
+def _cmd_eval(args):
+    from .mesh import write_mesh
+    out = _check_output(args.output, (".ply", ".vtu", ".obj"))
+    if not 0 <= args.level <= 8:
+        raise ValueError(f"--level must be between 0 and 8, got {args.level}")
+    S = _load_model(args.model)
+    fields = out.suffix.lower() != ".obj"
+    V, F, data = S.to_mesh(args.level, fields=fields)
+    data.pop("sphere", None)
+    write_mesh(out, V, F, data if fields else None)
+    print(f"wrote {out}: {len(V)} vertices" + (f", fields {', '.join(data)}" if fields else ""))
+    return 0
+
+
+def _cmd_info(args):
+    import json
+    S = _load_model(args.model)
+    net = S.net
+    print(f"model: {args.model}")
+    print(f"  network: width {net.width}, depth {net.depth}, bias {net.bias}, "
+          f"{net.n_params:,} parameters")
+    print(f"  output transform: centre {S.center.round(6).tolist()}, scale {S.scale:.6g}")
+    meta = dict(S.metadata)
+    fit = meta.pop("fit", None)
+    for k, v in meta.items():
+        print(f"  {k}: {v}")
+    if fit:
+        print(f"  fit: {fit.get('steps')} steps, {fit.get('seconds', 0):.1f} s, stopped by "
+              f"{fit.get('stopped')}; held-out position error {fit.get('position_mean'):.3g} "
+              f"(relative {fit.get('position_relative'):.2e}), normal error "
+              f"{fit.get('normal_mean_deg'):.3f} deg")
+        opts = fit.get("options", {})
+        if opts:
+            print(f"  fit options: {json.dumps(opts)}")
+    return 0
+
+
+def _cmd_eigen(args):
+    from .mesh import write_mesh
+    from .spectral import eigenmodes, eigenmodes_on_mesh
+    out = _check_output(args.output, (".ply", ".vtu")) if args.output else None
+    S = _load_model(args.model)
+    res = eigenmodes(S, args.k, method=args.method, rng=args.seed)
+    for i, lam in enumerate(res.eigenvalues, start=1):
+        print(f"lambda_{i} = {lam:.6g}")
+    if out is not None:
+        V, F, data = eigenmodes_on_mesh(res, S, args.level)
+        write_mesh(out, V, F, data)
+        print(f"wrote {out}: {len(V)} vertices, fields {', '.join(data)}")
+    return 0
 
 
 def main(argv=None) -> int:
@@ -31,8 +235,12 @@ def main(argv=None) -> int:
         return 0
     try:
         return int(args.func(args) or 0)
-    except (ValueError, OSError) as exc:
-        print(f"sns-np {args.command}: error: {exc}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"sns-np {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, OSError, ImportError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        print(f"sns-np {args.command}: error: {msg}", file=sys.stderr)
         return 2
 
 
