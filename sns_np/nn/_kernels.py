@@ -44,6 +44,10 @@ _SHIFT = 6755399441055744.0  # 1.5 * 2**52: adding and subtracting it rounds to 
 _JIT = dict(cache=True, fastmath={"contract"}, error_model="numpy")
 _PJIT = dict(_JIT, parallel=True)
 
+#: point blocks per parallel kernel call: scratch is allocated once per block, and 64 blocks
+#: balance any thread count up to 64
+_NBLK = 64
+
 
 @njit(**_JIT)
 def _exp_parts(z, p, ib):
@@ -101,43 +105,52 @@ def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
     """Fused forward jet rule of softplus on all streams of a chunk.
 
     Z : (c, S, w) pre-activation streams. With ``has_res`` the residual input R (c, S, w) is
-        added first, and with ``has_bias`` the bias (w,) is added to the value stream; the
-        complete pre-activation is written back into Z (the tape of the backward pass).
-    out : (c, S, w) activation streams (may be Z itself when no tape is kept).
+        added, and with ``has_bias`` the bias (w,) is added to the value stream. The complete
+        value and first-order pre-activations are written back into Z (the tape of the
+        first-order backward pass); the second-order ones are consumed on the fly.
+    out : (c, S, w) activation streams (may be Z itself, or R).
     sig : (c, w) receives s'(z) = sigmoid of the value stream.
 
     a = s(z);  a_a = s'(z) z_a;  a_ab = s''(z) z_a z_b + s'(z) z_ab
     """
     c, S, w = Z.shape
-    for i in prange(c):
+    nblk = min(c, _NBLK)
+    for t in prange(nblk):
         p = np.empty(w)
         ib = np.empty(w, np.int64)
         fb = ib.view(np.float64)
         s1 = np.empty(w)
         s2 = np.empty(w)
         a0 = np.empty(w)
-        if has_res:
-            for s in range(S):
+        for i in range((c * t) // nblk, (c * (t + 1)) // nblk):
+            if has_res:
+                for s in range(1 + m):
+                    for j in range(w):
+                        Z[i, s, j] += R[i, s, j]
+            if has_bias:
                 for j in range(w):
-                    Z[i, s, j] += R[i, s, j]
-        if has_bias:
-            for j in range(w):
-                Z[i, 0, j] += bias[j]
-        z0 = Z[i, 0]
-        _exp_parts(z0, p, ib)
-        _softplus_sigmoid(z0, p, fb, a0, s1, s2)
-        q = 1 + m
-        for a in range(k):
-            for b in range(a, k):
+                    Z[i, 0, j] += bias[j]
+            z0 = Z[i, 0]
+            _exp_parts(z0, p, ib)
+            _softplus_sigmoid(z0, p, fb, a0, s1, s2)
+            q = 1 + m
+            for a in range(k):
+                for b in range(a, k):
+                    if has_res:
+                        for j in range(w):
+                            out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
+                                            + s1[j] * (Z[i, q, j] + R[i, q, j]))
+                    else:
+                        for j in range(w):
+                            out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
+                                            + s1[j] * Z[i, q, j])
+                    q += 1
+            for a in range(m):
                 for j in range(w):
-                    out[i, q, j] = s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j] + s1[j] * Z[i, q, j]
-                q += 1
-        for a in range(m):
+                    out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
             for j in range(w):
-                out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
-        for j in range(w):
-            out[i, 0, j] = a0[j]
-            sig[i, j] = s1[j]
+                out[i, 0, j] = a0[j]
+                sig[i, j] = s1[j]
 
 
 @njit(**_PJIT)
