@@ -174,8 +174,8 @@ def surface_divergence(surface, p, vector_field, domain: str = "sphere", *,
     """Surface divergence of a vector field on the surface (paper Eq. 14).
 
     The vector field follows the surface-map protocol (``jet(x, 1)`` -> value (n, 3),
-    Jacobian (n, 3, 3)); its normal part, if any, contributes through the Jacobian only as the
-    formulas say (``div_S`` of a normal field ``phi n`` is ``-2 H phi``).
+    Jacobian (n, 3, 3)); a normal part contributes too (``div_S (phi n) = 2 H phi`` with the
+    convex-positive ``H``).
     ``domain="ambient"``: ``F`` around the surface, ``div_S F = div F - n^T J(F) n`` at ``S(p)``.
     ``domain="sphere"``: ``V(S(p)) = W(p)``, ``d_a V = J(W) e_a``, ``div_S V = X^a . d_a V``.
 
