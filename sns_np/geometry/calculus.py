@@ -1,4 +1,4 @@
-"""Surface gradient and surface divergence (paper Sec. 4.1, Eqs. 13-14) on any surface map.
+"""Surface gradient and surface divergence (paper Sec. 4.1, Eqs. 14-15) on any surface map.
 
 Two domains for the fields, as in :func:`sns_np.geometry.laplace_beltrami`:
 
@@ -38,7 +38,7 @@ DOMAINS = {"sphere", "ambient"}
 
 
 def surface_gradient_ambient(grad_f: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """``grad_S f = grad f - (grad f . n) n`` (paper Eq. 13), (n, 3).
+    """``grad_S f = grad f - (grad f . n) n`` (paper Eq. 14), (n, 3).
 
     Examples
     --------
@@ -49,7 +49,7 @@ def surface_gradient_ambient(grad_f: np.ndarray, n: np.ndarray) -> np.ndarray:
 
 
 def surface_divergence_ambient(JF: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """``div_S F = div F - n^T J(F) n`` (paper Eq. 14) for an ambient Jacobian ``JF`` (n, 3, 3).
+    """``div_S F = div F - n^T J(F) n`` (paper Eq. 15) for an ambient Jacobian ``JF`` (n, 3, 3).
 
     Examples
     --------
@@ -132,7 +132,7 @@ def surface_gradient(surface, p, field, domain: str = "sphere", *, chunk: int = 
                      tol: float = DEGENERATE_TOL, sphere_tol: float = SPHERE_TOL):
     """Surface gradient of a scalar field on the surface ``S(sphere)``, as vectors in R^3.
 
-    ``domain="ambient"``: ``grad_S f = grad f - (grad f . n) n`` at ``S(p)`` (paper Eq. 13).
+    ``domain="ambient"``: ``grad_S f = grad f - (grad f . n) n`` at ``S(p)`` (paper Eq. 14).
     ``domain="sphere"``: ``h(S(p)) = g(p)``, ``grad_S h = X_a I^ab (grad g . e_a)``.
 
     Parameters
@@ -171,7 +171,7 @@ def surface_gradient(surface, p, field, domain: str = "sphere", *, chunk: int = 
 def surface_divergence(surface, p, vector_field, domain: str = "sphere", *,
                        chunk: int = CHUNK, tol: float = DEGENERATE_TOL,
                        sphere_tol: float = SPHERE_TOL):
-    """Surface divergence of a vector field on the surface (paper Eq. 14).
+    """Surface divergence of a vector field on the surface (paper Eq. 15).
 
     The vector field follows the surface-map protocol (``jet(x, 1)`` -> value (n, 3),
     Jacobian (n, 3, 3)); a normal part contributes too (``div_S (phi n) = 2 H phi`` with the

@@ -40,7 +40,7 @@ def _frame(p: np.ndarray) -> np.ndarray:
 def tangent_frame(p, tol: float = SPHERE_TOL) -> np.ndarray:
     """Orthonormal tangent frame ``R = [e_u, e_v]`` with ``e_u x e_v = p``.
 
-    The paper's rotation matrix (Sec. 3.2),
+    The paper's rotation matrix (Sec. 3.2, Eq. 6),
 
         R = [[cos th cos ph, -sin ph], [cos th sin ph, cos ph], [-sin th, 0]],
 

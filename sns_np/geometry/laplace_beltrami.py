@@ -2,9 +2,9 @@
 
 Two independent evaluation paths (they agree to round-off on smooth inputs):
 
-* ``method="mean_curvature"`` (paper Eq. 15):
+* ``method="mean_curvature"`` (paper Eq. 16):
   ``Delta_S f = Delta f~ - 2 H grad f~ . n - n^T Hess(f~) n`` from an ambient extension ``f~``.
-* ``method="divgrad"`` (paper Eq. 12): the surface divergence of the surface-gradient vector
+* ``method="divgrad"`` (paper Eq. 13): the surface divergence of the surface-gradient vector
   field, differentiated in the chart ``q(u, v) = (p + u e_u + v e_v) / |.|`` of the frame.
 
 and two domains for the field (see :mod:`sns_np.geometry.calculus`): ``"sphere"`` (``g`` on
@@ -43,7 +43,7 @@ METHODS = {"mean_curvature", "divgrad"}
 
 
 def laplace_beltrami_mean_curvature_from_jets(grad_f, hess_f, H, n):
-    """``Delta_S f = tr Hess f~ - 2 H grad f~ . n - n^T Hess f~ n`` (paper Eq. 15).
+    """``Delta_S f = tr Hess f~ - 2 H grad f~ . n - n^T Hess f~ n`` (paper Eq. 16).
 
     Parameters
     ----------
@@ -73,7 +73,7 @@ def laplace_beltrami_divgrad_from_jets(f_a, f_ab, JR, S2):
         d_a V = X_ac w_c + X_c (d_a w)_c,          Delta_S h = X^a . d_a V.
 
     This is the coordinate formula ``I^ab (h_ab - Gamma^c_ab h_c)`` written as the divergence
-    of the gradient field (paper Eq. 12); it needs no normal, no mean curvature and no 3 x 3
+    of the gradient field (paper Eq. 13); it needs no normal, no mean curvature and no 3 x 3
     inverse.
 
     Parameters
@@ -98,7 +98,7 @@ def laplace_beltrami_divgrad_from_jets(f_a, f_ab, JR, S2):
 
 
 def sphere_field_extension(grad_g, hess_g, J, D2):
-    """Ambient jets of ``h~ = g o S^-1`` (``S`` a local diffeomorphism of R^3):
+    """Ambient jets of ``h~ = g o S^-1`` (``S`` a local diffeomorphism of R^3; paper Eq. 24):
 
         grad h~ = J^-T grad g,      Hess h~ = J^-T (Hess g - sum_i (grad h~)_i D2_i) J^-1,
 
@@ -171,10 +171,10 @@ def laplace_beltrami(surface, p, field, method: str = "divgrad", domain: str = "
     p : (n, 3) float array of unit vectors (within ``sphere_tol``; projected onto the sphere)
     field : field (``jet(x, 2)`` -> value (n,), gradient (n, 3), Hessian (n, 3, 3))
     method : {"divgrad", "mean_curvature"}
-        ``"divgrad"`` (default; paper Eq. 12): divergence of the gradient in the sphere chart.
+        ``"divgrad"`` (default; paper Eq. 13): divergence of the gradient in the sphere chart.
         It uses only derivatives along the sphere (7 propagated streams for a map with
         directional jets) and works for every regular parametrisation, even one whose 3 x 3
-        Jacobian is singular. ``"mean_curvature"`` (paper Eq. 15):
+        Jacobian is singular. ``"mean_curvature"`` (paper Eq. 16):
         ``Delta f~ - 2 H grad f~ . n - n^T Hess(f~) n``; with ``domain="sphere"`` it extends
         ``g`` by ``g o S^-1`` and needs the full jet and an invertible 3 x 3 ``J``.
     domain : {"sphere", "ambient"}
