@@ -1,9 +1,69 @@
 """Meshes: reading and checking, cotangent operators, spherical embedding, correspondences.
 
+Pipeline: :func:`load` -> :func:`check` -> :func:`spherical_embedding` -> :class:`Correspondence`
+(sampling for the fit, point location for evaluation). Cotangent operators, FEM eigenvalues
+and curvature baselines serve as references.
+
 Heavy optional dependencies (meshio, trimesh, libigl) are imported inside the functions that
 need them.
 """
 
+from .baselines import Curvatures, baseline_curvatures, discrete_curvatures
+from .check import MeshSummary, check
+from .correspondence import Correspondence, sample_surface, uniform_barycentric
+from .embedding import EmbeddingReport, mobius_centre, spherical_embedding
+from .equalise import equalise_areas
+from .errors import (
+    BoundaryError,
+    DegenerateFaceError,
+    DisconnectedError,
+    DuplicateFaceError,
+    EmbeddingError,
+    GenusError,
+    MeshDefectError,
+    MeshError,
+    MeshFileError,
+    NonManifoldError,
+    OrientationError,
+    UnreferencedVertexError,
+)
+from .foldrepair import FoldRepair
 from .icosphere import icosphere
+from .io import LoadReport, load, write_mesh
+from .operators import (
+    cotan_laplacian,
+    face_angles,
+    face_areas,
+    face_normals,
+    mass_matrix,
+    signed_volume,
+    surface_area,
+    vertex_normals,
+)
+from .spectrum import eigenvalues, laplacian_eigenmodes
+from .spherical import (
+    SphereLocator,
+    area_distortion,
+    orientation_determinants,
+    spherical_triangle_areas,
+)
 
-__all__ = ["icosphere"]
+__all__ = [
+    # input and checks
+    "load", "LoadReport", "write_mesh", "check", "MeshSummary", "icosphere",
+    # operators
+    "face_areas", "face_normals", "face_angles", "vertex_normals", "cotan_laplacian",
+    "mass_matrix", "surface_area", "signed_volume",
+    # spectrum and baselines
+    "laplacian_eigenmodes", "eigenvalues", "baseline_curvatures", "discrete_curvatures",
+    "Curvatures",
+    # spherical embedding
+    "spherical_embedding", "EmbeddingReport", "mobius_centre", "equalise_areas", "FoldRepair",
+    "orientation_determinants", "spherical_triangle_areas", "area_distortion",
+    # correspondence
+    "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator",
+    # errors
+    "MeshError", "MeshFileError", "MeshDefectError", "DegenerateFaceError", "DuplicateFaceError",
+    "UnreferencedVertexError", "NonManifoldError", "BoundaryError", "OrientationError",
+    "DisconnectedError", "GenusError", "EmbeddingError",
+]

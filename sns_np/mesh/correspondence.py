@@ -1,0 +1,219 @@
+"""Sphere <-> mesh correspondence through a fold-free spherical embedding.
+
+A point of surface triangle ``f`` with barycentric coordinates ``beta`` corresponds to the sphere
+point ``p = (beta_0 a + beta_1 b + beta_2 c) / |...|``, where ``a, b, c`` are the embedded
+corners of ``f`` (paper, Section 3: "we extend the embedding to a continuous embedding by
+employing barycentric coordinates"). Since a fold-free embedding tiles the sphere with the
+central projections of its chord triangles, this is a bijection; its inverse is the gnomonic
+barycentric coordinate of ``p`` in the spherical triangle that contains it.
+
+Two defects of the reference implementation are avoided here: faces are drawn with probability
+proportional to their area (not area squared), and sphere points are projected onto the sphere
+(not left on the chord triangle, where ``|p| < 1``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._validation import as_generator, as_points, check_positive_int
+from ..errors import ShapeError
+from ._arrays import as_mesh
+from .errors import EmbeddingError
+from .operators import face_areas, vertex_normals
+from .spherical import SphereLocator, orientation_determinants
+
+__all__ = ["sample_surface", "uniform_barycentric", "Correspondence"]
+
+
+def uniform_barycentric(n: int, rng=None) -> np.ndarray:
+    """Barycentric coordinates of ``n`` points uniform on a triangle.
+
+    Uses ``(1 - sqrt(r1), sqrt(r1) (1 - r2), sqrt(r1) r2)`` with ``r1, r2`` uniform on [0, 1)
+    (Osada et al. 2002).
+
+    Returns
+    -------
+    beta : (n, 3) float array, non-negative rows summing to 1
+
+    References
+    ----------
+    R. Osada, T. Funkhouser, B. Chazelle and D. Dobkin, "Shape distributions", ACM Transactions
+    on Graphics 21(4), 2002.
+    """
+    g = as_generator(rng)
+    r = g.random((2, n))
+    s = np.sqrt(r[0])
+    return np.stack([1.0 - s, s * (1.0 - r[1]), s * r[1]], axis=1)
+
+
+def _draw(cum, n, g):
+    """Face indices with probability proportional to the increments of ``cum``."""
+    f = np.searchsorted(cum, g.random(n) * cum[-1], side="right")
+    return np.minimum(f, cum.size - 1)
+
+
+def sample_surface(V, F, n: int, rng=None):
+    """Points drawn uniformly by area on a triangle mesh.
+
+    A face is chosen with probability ``A_f / sum A`` and a point uniformly inside it, so the
+    points are uniform on the surface.
+
+    Parameters
+    ----------
+    V : (k, 3) float array
+    F : (m, 3) int array
+    n : int
+        Number of points.
+    rng : None, int or numpy.random.Generator
+        ``None`` is seed 0 (reproducible).
+
+    Returns
+    -------
+    face : (n,) int array
+    beta : (n, 3) float array, barycentric coordinates in ``F[face]``
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(2)
+    >>> face, beta = sample_surface(V, F, 5, rng=1)
+    >>> face.shape, beta.shape
+    ((5,), (5, 3))
+    >>> q = (beta[:, :, None] * V[F[face]]).sum(axis=1)      # the points themselves
+    """
+    V, F = as_mesh(V, F)
+    n = check_positive_int(n, "n", minimum=0)
+    g = as_generator(rng)
+    cum = np.cumsum(face_areas(V, F))
+    face = _draw(cum, n, g)
+    return face, uniform_barycentric(n, g)
+
+
+class Correspondence:
+    """The continuous map between a mesh and its spherical embedding, both ways.
+
+    Parameters
+    ----------
+    V : (n, 3) float array, the surface mesh
+    F : (m, 3) int array
+    Vs : (n, 3) float array, a fold-free spherical embedding of ``V`` (unit vectors, every
+        ``det[a, b, c] > 0``), e.g. from :func:`sns_np.mesh.spherical_embedding`
+    normals : {"angle", "area"}
+        Weighting of the vertex normals that are interpolated to give smooth target normals.
+
+    Attributes
+    ----------
+    area : float
+        Surface area of the mesh.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sns_np.mesh import icosphere
+    >>> Vs, F = icosphere(3)
+    >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+    >>> p, q, nrm = C.sample(2048, rng=0)
+    >>> bool(np.allclose(np.linalg.norm(p, axis=1), 1.0))
+    True
+    >>> q2, _ = C.mesh_point(p)
+    >>> bool(np.allclose(q2, q))
+    True
+    """
+
+    def __init__(self, V, F, Vs, *, normals: str = "angle"):
+        V, F = as_mesh(V, F)
+        Vs = as_points(Vs, "Vs")
+        if Vs.shape != V.shape:
+            raise ShapeError(f"Vs must have the shape of V {V.shape}, got {Vs.shape}")
+        r = np.linalg.norm(Vs, axis=1)
+        if np.abs(r - 1.0).max() > 1e-6:
+            k = int(np.argmax(np.abs(r - 1.0)))
+            raise ShapeError(f"Vs must be unit vectors; vertex {k} has |Vs| = {r[k]:.12g}")
+        det = orientation_determinants(Vs, F)
+        if not (det > 0).all():
+            bad = np.flatnonzero(det <= 0)
+            raise EmbeddingError(
+                f"the spherical embedding folds {bad.size} triangle(s) (det[a, b, c] <= 0), "
+                f"e.g. face {int(bad[0])}; expected a fold-free embedding")
+        self.V, self.F, self.Vs = V, F, Vs
+        self.N = vertex_normals(V, F, weighting=normals)
+        A = face_areas(V, F)
+        self.area = float(A.sum())
+        self._cum = np.cumsum(A)
+        # corners gathered once, [mesh | sphere | normal] side by side, so that a batch of
+        # samples costs one fancy-indexing pass: _corners[f, k] = (V, Vs, N)[F[f, k]]
+        self._corners = np.ascontiguousarray(np.concatenate([V[F], Vs[F], self.N[F]], axis=2))
+        self._locator = None
+
+    @staticmethod
+    def _combine(corners, face, beta):
+        C = corners[face]
+        return (beta[:, 0, None] * C[:, 0] + beta[:, 1, None] * C[:, 1]
+                + beta[:, 2, None] * C[:, 2])
+
+    @staticmethod
+    def _unit(x):
+        return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+    def to_sphere(self, face, beta) -> np.ndarray:
+        """Sphere points ``p`` (k, 3), exactly unit, of barycentric points ``(face, beta)``."""
+        return self._unit(self._combine(self._corners[:, :, 3:6], face, beta))
+
+    def to_mesh(self, face, beta):
+        """Mesh points ``q`` (k, 3) and unit interpolated normals (k, 3) of ``(face, beta)``."""
+        X = self._combine(self._corners, face, beta)
+        return X[:, 0:3], self._unit(X[:, 6:9])
+
+    def sample(self, n: int, rng=None):
+        """Draw ``n`` points uniformly by area on the mesh, with their sphere points.
+
+        Parameters
+        ----------
+        n : int
+        rng : None, int or numpy.random.Generator
+            Pass one Generator through a fitting loop; ``None`` is seed 0.
+
+        Returns
+        -------
+        p : (n, 3) float array, sphere points, ``|p| = 1``
+        q : (n, 3) float array, the corresponding mesh points
+        normals : (n, 3) float array, unit, barycentric interpolation of vertex normals
+        """
+        g = as_generator(rng)
+        face = _draw(self._cum, n, g)
+        beta = uniform_barycentric(n, g)
+        X = self._combine(self._corners, face, beta)
+        return self._unit(X[:, 3:6]), X[:, 0:3], self._unit(X[:, 6:9])
+
+    @property
+    def locator(self) -> SphereLocator:
+        """The point-location structure on the embedding (built on first use)."""
+        if self._locator is None:
+            self._locator = SphereLocator(self.Vs, self.F)
+        return self._locator
+
+    def locate(self, p):
+        """Triangle and barycentric coordinates of sphere points.
+
+        Parameters
+        ----------
+        p : (k, 3) float array, unit vectors
+
+        Returns
+        -------
+        face : (k,) int array
+        beta : (k, 3) float array, non-negative, rows sum to 1
+        """
+        return self.locator.locate(p)
+
+    def mesh_point(self, p):
+        """Mesh points and smooth normals corresponding to sphere points ``p`` (k, 3).
+
+        Returns
+        -------
+        q : (k, 3) float array
+        normals : (k, 3) float array, unit
+        """
+        face, beta = self.locate(p)
+        return self.to_mesh(face, beta)

@@ -1,0 +1,214 @@
+"""Local repair of folded triangles in a spherical embedding.
+
+Triangles with ``det[a, b, c] <= 0`` are grouped into regions: their vertices, grown by a few
+rings, with any enclosed holes filled, so that each region is a topological disc. Each region
+is mapped to the plane by the gnomonic projection about its centre. That projection maps great
+circles to straight lines, so a spherical triangle is positively oriented exactly when its
+planar image is. The interior vertices are then placed by Tutte's barycentric method, with the
+mean-value weights of the *surface* mesh (positive on every edge, Floater 2003) and the region
+boundary held fixed, and projected back to the sphere. If the region's boundary is convex, this
+is guaranteed fold-free (Tutte 1963; Floater 2003). Otherwise a region that still folds is grown
+by one more ring and solved again.
+
+References
+----------
+W. T. Tutte, "How to draw a graph", Proceedings of the London Mathematical Society 13, 1963.
+
+M. S. Floater, "Mean value coordinates", Computer Aided Geometric Design 20(1), 2003.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.sparse.csgraph import connected_components
+
+from .spherical import orientation_determinants
+
+__all__ = ["FoldRepair"]
+
+
+def mean_value_weights(V, F) -> sp.csr_matrix:
+    """Row-normalised mean-value weights of a surface mesh: positive on every edge.
+
+    ``w_ij = (tan(alpha_ij / 2) + tan(beta_ij / 2)) / |v_i - v_j|`` with ``alpha_ij`` and
+    ``beta_ij`` the angles at ``v_i`` of the two triangles that share edge ``ij``.
+    """
+    n = V.shape[0]
+    P = V[F]
+    rows, cols, vals = [], [], []
+    for k in range(3):
+        i, j, l = F[:, k], F[:, (k + 1) % 3], F[:, (k + 2) % 3]
+        u = P[:, (k + 1) % 3] - P[:, k]
+        v = P[:, (k + 2) % 3] - P[:, k]
+        nu, nv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
+        # tan(theta / 2) = |u x v| / (|u||v| + u.v), stable for all angles in (0, pi)
+        t = np.linalg.norm(np.cross(u, v), axis=1) / (nu * nv + np.einsum("ij,ij->i", u, v))
+        rows += [i, i]
+        cols += [j, l]
+        vals += [t / nu, t / nv]
+    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                      shape=(n, n))
+    return (sp.diags(1.0 / np.asarray(W.sum(axis=1)).ravel()) @ W).tocsr()
+
+
+class FoldRepair:
+    """Fold repair for embeddings of one surface mesh (caches its weights and adjacency).
+
+    Parameters
+    ----------
+    V : (n, 3) float array, the surface (its angles give the Tutte weights)
+    F : (m, 3) int array
+    """
+
+    def __init__(self, V, F):
+        self.F = F
+        self.W = mean_value_weights(V, F)
+        A = (self.W != 0).astype(np.float64)
+        self.A = ((A + A.T) > 0).astype(np.float64).tocsr()
+        # faces around each vertex (CSR layout) and the vertex's corner in each
+        order = np.argsort(F.ravel(), kind="stable")
+        self._vf_ptr = np.concatenate([[0], np.cumsum(np.bincount(F.ravel(),
+                                                                  minlength=V.shape[0]))])
+        self._vf_face, self._vf_corner = order // 3, order % 3
+
+    def _move_into_kernel(self, P, i):
+        """Move vertex i to the Chebyshev centre of the kernel of its 1-ring (an LP).
+
+        In the gnomonic chart at ``P[i]`` each incident triangle ``(i, j, k)`` is positive
+        exactly when the vertex lies left of the line ``j -> k``: a half-plane. The point
+        deepest inside all of them is found by maximising ``t`` subject to
+        ``cross(u_k - u_j, x - u_j) >= t |u_k - u_j|``. Returns False if the kernel is empty.
+        """
+        from scipy.optimize import linprog
+
+        s, e = self._vf_ptr[i], self._vf_ptr[i + 1]
+        faces, corner = self._vf_face[s:e], self._vf_corner[s:e]
+        j = self.F[faces, (corner + 1) % 3]
+        k = self.F[faces, (corner + 2) % 3]
+        c = P[i]
+        e1 = np.cross(c, [1.0, 0.0, 0.0] if abs(c[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(c, e1)
+
+        def chart(X):
+            return np.stack([X @ e1, X @ e2], axis=1) / (X @ c)[:, None]
+
+        if min((P[j] @ c).min(), (P[k] @ c).min()) <= 0.05:
+            return False
+        uj, uk = chart(P[j]), chart(P[k])
+        scale = np.abs(np.concatenate([uj, uk])).max()
+        uj, uk = uj / scale, uk / scale
+        d = uk - uj
+        nd = np.linalg.norm(d, axis=1)
+        # cross(d, x - uj) = d0 x1 - d1 x0 - cross(d, uj) >= t |d|
+        A_ub = np.stack([d[:, 1], -d[:, 0], nd], axis=1)
+        b_ub = -(d[:, 0] * uj[:, 1] - d[:, 1] * uj[:, 0])
+        res = linprog([0.0, 0.0, -1.0], A_ub=A_ub, b_ub=b_ub,
+                      bounds=[(None, None), (None, None), (None, 1.0)], method="highs")
+        if res.status != 0 or res.x[2] <= 0:
+            return False
+        x = res.x[:2] * scale
+        X = c + x[0] * e1 + x[1] * e2
+        P[i] = X / np.linalg.norm(X)
+        return True
+
+    def _kernel_sweeps(self, P, flatness, sweeps=3, max_vertices=2000):
+        moved = set()
+        for _ in range(sweeps):
+            bad = self.bad_faces(P, flatness)
+            if not bad.any():
+                break
+            verts = np.unique(self.F[bad].ravel())
+            if verts.size > max_vertices:
+                break
+            for i in verts:
+                fi = self._vf_face[self._vf_ptr[i]:self._vf_ptr[i + 1]]
+                if not self.bad_faces_subset(P, fi, flatness).any():
+                    continue                          # fixed by moving a neighbour already
+                if self._move_into_kernel(P, int(i)):
+                    moved.add(int(i))
+        return moved
+
+    def _tutte_in_chart(self, P, inside, boundary):
+        c = P[inside].sum(axis=0)
+        c /= np.linalg.norm(c)
+        if (P[np.concatenate([inside, boundary])] @ c).min() <= 0.05:
+            return False                             # the region is too large for one chart
+        e1 = np.cross(c, [1.0, 0.0, 0.0] if abs(c[0]) < 0.9 else [0.0, 1.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(c, e1)
+        Pb = P[boundary]
+        ub = np.stack([Pb @ e1, Pb @ e2], axis=1) / (Pb @ c)[:, None]
+        Wi = self.W[inside]
+        K = sp.identity(inside.size, format="csc") - Wi[:, inside].tocsc()
+        u = np.asarray(spla.spsolve(K, Wi[:, boundary] @ ub)).reshape(-1, 2)
+        X = c + u[:, :1] * e1 + u[:, 1:] * e2
+        P[inside] = X / np.linalg.norm(X, axis=1, keepdims=True)
+        return True
+
+    def bad_faces(self, P, flatness: float = 0.0) -> np.ndarray:
+        """Faces folded or flatter than ``det[a, b, c] <= flatness * (longest edge)^2``."""
+        det = orientation_determinants(P, self.F)
+        if flatness <= 0:
+            return det <= 0
+        Q = P[self.F]
+        l2 = np.max([((Q[:, i] - Q[:, (i + 1) % 3]) ** 2).sum(axis=1) for i in range(3)], axis=0)
+        return det <= flatness * l2
+
+    def bad_faces_subset(self, P, faces, flatness: float = 0.0) -> np.ndarray:
+        """:meth:`bad_faces` restricted to the given faces."""
+        Q = P[self.F[faces]]
+        det = np.einsum("ij,ij->i", Q[:, 0], np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
+        if flatness <= 0:
+            return det <= 0
+        l2 = np.max([((Q[:, i] - Q[:, (i + 1) % 3]) ** 2).sum(axis=1) for i in range(3)], axis=0)
+        return det <= flatness * l2
+
+    def __call__(self, P, max_rounds: int = 30, flatness: float = 0.0):
+        """Repair ``P`` in place: remove folded (and, optionally, nearly flat) triangles.
+
+        Parameters
+        ----------
+        P : (n, 3) float array, unit vectors (modified)
+        max_rounds : int
+        flatness : float
+            Also treat triangles with ``det <= flatness * (longest edge)^2`` as bad.
+
+        Returns
+        -------
+        rounds : int
+            Rounds used (``max_rounds + 1`` when folds remain).
+        moved : int
+            Number of vertices moved.
+        """
+        F, A = self.F, self.A
+        n = P.shape[0]
+        moved = np.zeros(n, dtype=bool)
+        moved[list(self._kernel_sweeps(P, flatness))] = True
+        for rnd in range(1, max_rounds + 1):
+            bad = self.bad_faces(P, flatness)
+            if not bad.any():
+                return rnd - 1, int(moved.sum())
+            mask = np.zeros(n, dtype=bool)
+            mask[F[bad].ravel()] = True
+            for _ in range(rnd + 1):
+                mask |= (A @ mask.astype(np.float64)) > 0
+            # fill holes: outside components other than the largest join the region
+            out = np.flatnonzero(~mask)
+            if out.size == 0:
+                break
+            ncomp, lab = connected_components(A[out][:, out], directed=False)
+            if ncomp > 1:
+                mask[out[lab != np.argmax(np.bincount(lab))]] = True
+            ins = np.flatnonzero(mask)
+            ncomp, lab = connected_components(A[ins][:, ins], directed=False)
+            for k in range(ncomp):
+                inside = ins[lab == k]
+                ring = (np.asarray(A[inside].sum(axis=0)).ravel() > 0) & ~mask
+                if self._tutte_in_chart(P, inside, np.flatnonzero(ring)):
+                    moved[inside] = True
+        if self.bad_faces(P, flatness).any():
+            return max_rounds + 1, int(moved.sum())
+        return max_rounds, int(moved.sum())

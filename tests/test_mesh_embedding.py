@@ -1,0 +1,165 @@
+import numpy as np
+import pytest
+
+from sns_np.mesh import (
+    BoundaryError,
+    FoldRepair,
+    GenusError,
+    area_distortion,
+    equalise_areas,
+    icosphere,
+    load,
+    mass_matrix,
+    mobius_centre,
+    orientation_determinants,
+    spherical_embedding,
+    spherical_triangle_areas,
+)
+
+from .test_mesh_helpers import ellipsoid, torus
+
+ALL_SHARED = ["icosphere2.obj", "icosphere3.obj", "uv_sphere.obj", "spot_control_mesh.obj",
+              "spot_triangulated.obj", "spot_quadrangulated.obj", "flower_mesh3.obj",
+              "flower_mesh5.obj", "decimated_max.obj", "max10606.obj", "armadillo21622.obj"]
+
+
+def bumpy(level=3, seed=0):
+    """A star-shaped blob with a long nose: radial bumps on an icosphere."""
+    V, F = icosphere(level)
+    g = np.random.default_rng(seed)
+    c = g.standard_normal((6, 3))
+    c /= np.linalg.norm(c, axis=1, keepdims=True)
+    r = 1 + 0.4 * np.exp(-((V[:, None] - c) ** 2).sum(-1) / 0.05).sum(1)
+    r += 2.0 * np.exp(-((V - [0, 0, 1]) ** 2).sum(-1) / 0.02)
+    return V * r[:, None], F
+
+
+def assert_bijective(Vs, F):
+    assert np.allclose(np.linalg.norm(Vs, axis=1), 1, atol=1e-12)
+    assert (orientation_determinants(Vs, F) > 0).all()
+    assert spherical_triangle_areas(Vs, F).sum() == pytest.approx(4 * np.pi, abs=1e-9)
+
+
+def test_sphere_maps_to_itself_up_to_rotation():
+    V, F = icosphere(3)
+    Vs, rep = spherical_embedding(V, F, equalise=0)
+    assert_bijective(Vs, F)
+    # a conformal self-map of the round sphere with centred area is a rotation: preserves dots
+    G, Gs = V @ V.T, Vs @ Vs.T
+    assert abs(G - Gs).max() < 1e-3
+    assert rep.flow_steps == 1 and rep.folds_after_flow == 0
+    assert rep.log_area_ratio_std < 5e-3
+
+
+@pytest.mark.parametrize("equalise", [0.0, 1.0])
+def test_ellipsoid_and_bumpy_shapes(equalise):
+    for V, F in (ellipsoid(3, (1.0, 2.0, 3.0)), bumpy()):
+        Vs, rep = spherical_embedding(V, F, equalise=equalise, grid_level=4)
+        assert_bijective(Vs, F)
+        assert rep.folds_after_repair == 0 and rep.flipped_after == 0
+        d = area_distortion(V, F, Vs)
+        assert rep.log_area_ratio_std == pytest.approx(d.std())
+        assert rep.log_area_ratio_min == pytest.approx(d.min())
+        if equalise:
+            assert rep.log_area_ratio_std < 0.7 * rep.conformal_log_area_ratio_std
+        else:
+            assert rep.equalise_steps == 0
+            assert rep.log_area_ratio_std == pytest.approx(rep.conformal_log_area_ratio_std)
+
+
+def test_scale_and_translation_invariance():
+    V, F = ellipsoid(2)
+    Vs1, _ = spherical_embedding(V, F, equalise=0)
+    Vs2, _ = spherical_embedding(1e3 * V + [5.0, -2.0, 7.0], F, equalise=0)
+    assert abs(Vs1 - Vs2).max() < 1e-6
+
+
+def test_embedding_is_deterministic():
+    V, F = bumpy(2)
+    a, _ = spherical_embedding(V, F, grid_level=3)
+    b, _ = spherical_embedding(V, F, grid_level=3)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_inputs_are_checked_first():
+    V, F = icosphere(2)
+    with pytest.raises(BoundaryError):
+        spherical_embedding(V, F[1:])
+    with pytest.raises(GenusError):
+        spherical_embedding(*torus())
+    with pytest.raises(ValueError, match="equalise must be in"):
+        spherical_embedding(V, F, equalise=2)
+
+
+def test_mobius_centre_moves_the_mass_centre_to_the_origin():
+    from sns_np.mesh.embedding import _mobius
+
+    V, F = icosphere(3)
+    P = _mobius(V, np.array([0.3, -0.2, 0.5]))           # crowds the points near -a
+    w = mass_matrix(V, F).diagonal()
+    assert np.linalg.norm(w @ P) > 0.1
+    Q, it = mobius_centre(P, w)
+    assert np.linalg.norm(w @ Q) < 1e-9 and it > 0
+    assert (orientation_determinants(Q, F) > 0).all()
+    # the centred sphere is (up to rotation) the original: Möbius maps form a group
+    assert abs(Q @ Q.T - V @ V.T).max() < 1e-6
+    with pytest.raises(ValueError, match="non-negative masses"):
+        mobius_centre(P, -w)
+
+
+def test_fold_repair_fixes_a_pushed_vertex():
+    V, F = icosphere(3)
+    P = V.copy()
+    # push vertex 100 across its one-ring (beyond a neighbour): several folded triangles
+    nb = F[(F == 100).any(axis=1)].ravel()
+    j = nb[nb != 100][0]
+    P[100] = P[j] + 1.5 * (P[j] - P[100])
+    P[100] /= np.linalg.norm(P[100])
+    assert (orientation_determinants(P, F) <= 0).sum() >= 2
+    rounds, moved = FoldRepair(V, F)(P)
+    assert_bijective(P, F)
+    assert moved >= 1 and rounds <= 2
+
+
+def test_fold_repair_regions_by_tutte():
+    V, F = icosphere(3)
+    P = V.copy()
+    # scramble a patch: reflect the vertices near the north pole through its plane z = c
+    patch = np.flatnonzero(V[:, 2] > 0.9)
+    rot = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]])          # plus swap two of them
+    P[patch] = P[patch] @ rot.T
+    P[patch[[0, 1]]] = P[patch[[1, 0]]]
+    assert (orientation_determinants(P, F) <= 0).any()
+    rep = FoldRepair(V, F)
+    rounds, _ = rep(P)
+    assert_bijective(P, F)
+
+
+def test_equalise_areas_reduces_distortion_and_keeps_folds_away():
+    V, F = ellipsoid(3, (1.0, 1.0, 4.0))
+    Vs, _ = spherical_embedding(V, F, equalise=0)
+    for strength in (0.5, 1.0):
+        Ve, info = equalise_areas(V, F, Vs, strength=strength, grid_level=4)
+        assert_bijective(Ve, F)
+        assert area_distortion(V, F, Ve).std() < area_distortion(V, F, Vs).std()
+        assert not info["stalled"]
+
+
+@pytest.mark.data
+@pytest.mark.parametrize("name", ["spot_control_mesh.obj", "uv_sphere.obj"])
+def test_small_shared_meshes(mesh_dir, name):
+    V, F = load(mesh_dir / name)
+    Vs, rep = spherical_embedding(V, F)
+    assert_bijective(Vs, F)
+    assert rep.log_area_ratio_std < 1.0
+
+
+@pytest.mark.data
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ALL_SHARED)
+def test_every_shared_mesh_is_embedded_fold_free(mesh_dir, name):
+    V, F = load(mesh_dir / name)
+    Vs, rep = spherical_embedding(V, F)
+    assert_bijective(Vs, F)
+    assert rep.folds_after_repair == 0
+    assert rep.log_area_ratio_std <= rep.conformal_log_area_ratio_std + 1e-9
