@@ -10,6 +10,7 @@ from sns_np.mesh import (
     icosphere,
     load,
     mass_matrix,
+    minimise_stretch,
     mobius_centre,
     orientation_determinants,
     spherical_embedding,
@@ -42,8 +43,9 @@ def assert_bijective(Vs, F):
 
 def test_sphere_maps_to_itself_up_to_rotation():
     V, F = icosphere(3)
-    Vs, rep = spherical_embedding(V, F, equalise=0)
+    Vs, rep = spherical_embedding(V, F, balance="none")
     assert_bijective(Vs, F)
+    assert rep.method == "conformal"
     # a conformal self-map of the round sphere with centred area is a rotation: preserves dots
     G, Gs = V @ V.T, Vs @ Vs.T
     assert abs(G - Gs).max() < 1e-3
@@ -51,26 +53,31 @@ def test_sphere_maps_to_itself_up_to_rotation():
     assert rep.log_area_ratio_std < 5e-3
 
 
-@pytest.mark.parametrize("equalise", [0.0, 1.0])
-def test_ellipsoid_and_bumpy_shapes(equalise):
+@pytest.mark.parametrize("balance", ["none", "stretch", "auto"])
+def test_ellipsoid_and_bumpy_shapes(balance):
     for V, F in (ellipsoid(3, (1.0, 2.0, 3.0)), bumpy()):
-        Vs, rep = spherical_embedding(V, F, equalise=equalise, grid_level=4)
+        Vs, rep = spherical_embedding(V, F, balance=balance, grid_level=4)
         assert_bijective(Vs, F)
         assert rep.folds_after_repair == 0 and rep.flipped_after == 0
         d = area_distortion(V, F, Vs)
         assert rep.log_area_ratio_std == pytest.approx(d.std())
         assert rep.log_area_ratio_min == pytest.approx(d.min())
-        if equalise:
-            assert rep.log_area_ratio_std < 0.7 * rep.conformal_log_area_ratio_std
-        else:
-            assert rep.equalise_steps == 0
+        if balance == "none":
+            assert rep.method == "conformal" and rep.stretch_iterations == 0
             assert rep.log_area_ratio_std == pytest.approx(rep.conformal_log_area_ratio_std)
+        else:
+            assert rep.log_area_ratio_std < 0.5 * rep.conformal_log_area_ratio_std
+            assert rep.stretch_p99 <= rep.candidates["conformal"]
+        if balance == "auto":
+            assert set(rep.candidates) == {"conformal", "stretch", "density"}
+            assert rep.stretch_p99 == min(rep.candidates.values())
+        assert "embedding" in str(rep)
 
 
 def test_scale_and_translation_invariance():
     V, F = ellipsoid(2)
-    Vs1, _ = spherical_embedding(V, F, equalise=0)
-    Vs2, _ = spherical_embedding(1e3 * V + [5.0, -2.0, 7.0], F, equalise=0)
+    Vs1, _ = spherical_embedding(V, F, balance="stretch")
+    Vs2, _ = spherical_embedding(1e3 * V + [5.0, -2.0, 7.0], F, balance="stretch")
     assert abs(Vs1 - Vs2).max() < 1e-6
 
 
@@ -87,8 +94,8 @@ def test_inputs_are_checked_first():
         spherical_embedding(V, F[1:])
     with pytest.raises(GenusError):
         spherical_embedding(*torus())
-    with pytest.raises(ValueError, match="equalise must be in"):
-        spherical_embedding(V, F, equalise=2)
+    with pytest.raises(ValueError, match="unknown balance 'equal'"):
+        spherical_embedding(V, F, balance="equal")
 
 
 def test_mobius_centre_moves_the_mass_centre_to_the_origin():
@@ -135,9 +142,23 @@ def test_fold_repair_regions_by_tutte():
     assert_bijective(P, F)
 
 
+def test_minimise_stretch_reduces_distortion_monotonically():
+    V, F = bumpy(3, seed=1)
+    Vs, _ = spherical_embedding(V, F, balance="none")
+    d0 = area_distortion(V, F, Vs).std()
+    prev = d0
+    for its in (1, 5, 20):
+        Vm, info = minimise_stretch(V, F, Vs, iterations=its)
+        assert_bijective(Vm, F)
+        assert info["spread"] == pytest.approx(area_distortion(V, F, Vm).std())
+        assert info["spread"] <= prev + 1e-12
+        prev = info["spread"]
+    assert prev < 0.3 * d0
+
+
 def test_equalise_areas_reduces_distortion_and_keeps_folds_away():
     V, F = ellipsoid(3, (1.0, 1.0, 4.0))
-    Vs, _ = spherical_embedding(V, F, equalise=0)
+    Vs, _ = spherical_embedding(V, F, balance="none")
     for strength in (0.5, 1.0):
         Ve, info = equalise_areas(V, F, Vs, strength=strength, grid_level=4)
         assert_bijective(Ve, F)
@@ -162,4 +183,5 @@ def test_every_shared_mesh_is_embedded_fold_free(mesh_dir, name):
     Vs, rep = spherical_embedding(V, F)
     assert_bijective(Vs, F)
     assert rep.folds_after_repair == 0
-    assert rep.log_area_ratio_std <= rep.conformal_log_area_ratio_std + 1e-9
+    assert rep.stretch_p99 == min(rep.candidates.values())
+    assert rep.log_area_ratio_std <= rep.conformal_log_area_ratio_std + 0.01

@@ -46,7 +46,9 @@ from .spherical import (
     area_distortion,
     orientation_determinants,
     spherical_triangle_areas,
+    stretch,
 )
+from .stretch import minimise_stretch
 
 __all__ = [
     # input and checks
@@ -58,8 +60,9 @@ __all__ = [
     "laplacian_eigenmodes", "eigenvalues", "baseline_curvatures", "discrete_curvatures",
     "Curvatures",
     # spherical embedding
-    "spherical_embedding", "EmbeddingReport", "mobius_centre", "equalise_areas", "FoldRepair",
-    "orientation_determinants", "spherical_triangle_areas", "area_distortion",
+    "spherical_embedding", "EmbeddingReport", "mobius_centre", "minimise_stretch",
+    "equalise_areas", "FoldRepair", "orientation_determinants", "spherical_triangle_areas",
+    "area_distortion", "stretch",
     # correspondence
     "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator",
     # errors

@@ -17,10 +17,14 @@ Pipeline (:func:`spherical_embedding`):
 4. **Fold repair** (:class:`~sns_np.mesh.foldrepair.FoldRepair`): vertices of folded triangles
    are moved into the kernel of their 1-ring (a small linear programme in the gnomonic chart),
    and regions that still fold are re-embedded by Tutte's method with mean-value weights.
-5. **Area equalisation** (:func:`~sns_np.mesh.equalise.equalise_areas`, optional, on by
-   default): a density-equalising flow (Gastner & Newman 2004 on the sphere) that moves the
-   conformal map towards area preservation, so that limbs squeezed by the conformal map get a
-   fair share of the sphere; it keeps the embedding fold-free.
+5. **Area balancing** (``balance``): a conformal map squeezes protrusions exponentially (the
+   armadillo's fingers get ``e^-27`` of their fair share of the sphere). Stretch-energy
+   minimisation (:func:`~sns_np.mesh.stretch.minimise_stretch`, Yueh et al. 2019) moves the
+   map towards an equiareal one by reweighted Tutte solves in stereographic charts, and a
+   density-equalising flow (:func:`~sns_np.mesh.equalise.equalise_areas`, Gastner & Newman
+   2004 on the sphere) evens out what is left at the scale of a fixed grid. Both keep the map
+   fold-free. By default the candidate (conformal, stretch, stretch + density) with the
+   smallest 99th-percentile stretch of the sphere-to-surface map is returned.
 
 References
 ----------
@@ -29,6 +33,9 @@ non-singular?", Computer Graphics Forum 31(5) (SGP), 2012.
 
 A. Baden, K. Crane and M. Kazhdan, "Möbius registration", Computer Graphics Forum 37(5) (SGP),
 2018.
+
+M.-H. Yueh, W.-W. Lin, C.-T. Wu and S.-T. Yau, "A novel stretch energy minimization algorithm
+for equiareal parameterizations", Journal of Scientific Computing 78, 2019.
 
 M. T. Gastner and M. E. J. Newman, "Diffusion-based method for producing density-equalizing
 maps", PNAS 101(20), 2004.
@@ -43,14 +50,20 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from .._validation import as_points, check_positive_float, check_positive_int
+from .._validation import as_points, check_choice, check_positive_float, check_positive_int
 from ._arrays import as_mesh
 from .check import check
 from .equalise import equalise_areas
 from .errors import EmbeddingError
 from .foldrepair import FoldRepair
 from .operators import cotan_laplacian, face_areas, mass_matrix
-from .spherical import area_distortion, orientation_determinants, spherical_triangle_areas
+from .spherical import (
+    area_distortion,
+    orientation_determinants,
+    spherical_triangle_areas,
+    stretch,
+)
+from .stretch import minimise_stretch
 
 __all__ = ["EmbeddingReport", "spherical_embedding", "mobius_centre"]
 
@@ -61,6 +74,8 @@ class EmbeddingReport:
 
     Attributes
     ----------
+    method : str
+        The returned candidate: ``"conformal"``, ``"stretch"`` or ``"density"``.
     flow_steps : int
         Conformalized mean curvature flow steps taken.
     roundness : float
@@ -69,21 +84,29 @@ class EmbeddingReport:
         Triangles with ``det[a, b, c] <= 0`` after projection, after Möbius centring and at the
         end (always 0 when the function returns).
     repair_rounds, repaired_vertices : int
-        Rounds of Tutte region repair and the number of vertices the repair moved.
+        Rounds of Tutte region repair of the conformal map and the vertices the repair moved.
     centring_iterations : int
-    equalise_steps : int
-        Steps of the area-equalising flow (0 when disabled); ``equalise_time`` its seconds.
+    stretch_iterations, density_steps : int
+        Accepted stretch-minimisation steps and density-flow steps (0 when not run).
     conformal_log_area_ratio_std, conformal_log_area_ratio_min : float
-        Area distortion of the conformal map, before equalisation.
+        Area distortion of the conformal map.
     log_area_ratio_mean, log_area_ratio_std, log_area_ratio_min, log_area_ratio_max : float
         Statistics over faces of ``log((s_f / sum s) / (A_f / sum A))`` with ``s_f`` the
         spherical and ``A_f`` the surface triangle area (0 everywhere for an area-preserving map).
+    stretch_p99, stretch_max : float
+        99th percentile (weighted by surface area) and maximum over faces of the largest
+        singular value of the sphere-to-surface map, both normalised to area ``4 pi``
+        (:func:`sns_np.mesh.spherical.stretch`); the candidate with the smallest ``stretch_p99``
+        is returned.
+    candidates : dict
+        ``stretch_p99`` of every candidate computed.
     time : float
         Wall-clock seconds.
     """
 
     n_vertices: int
     n_faces: int
+    method: str
     flow_steps: int
     roundness: float
     folds_after_flow: int
@@ -92,14 +115,17 @@ class EmbeddingReport:
     repair_rounds: int
     repaired_vertices: int
     centring_iterations: int
-    equalise_steps: int
-    equalise_time: float
+    stretch_iterations: int
+    density_steps: int
     conformal_log_area_ratio_std: float
     conformal_log_area_ratio_min: float
     log_area_ratio_mean: float
     log_area_ratio_std: float
     log_area_ratio_min: float
     log_area_ratio_max: float
+    stretch_p99: float
+    stretch_max: float
+    candidates: dict
     time: float
 
     @property
@@ -113,11 +139,12 @@ class EmbeddingReport:
         return self.folds_after_repair
 
     def __str__(self) -> str:
-        return (f"{self.flow_steps} flow steps, folds {self.folds_after_flow} -> "
-                f"{self.folds_after_repair}, area equalisation {self.equalise_steps} steps, "
-                f"log area ratio std {self.log_area_ratio_std:.2f} "
-                f"[{self.log_area_ratio_min:.2f}, {self.log_area_ratio_max:.2f}] "
-                f"(conformal std {self.conformal_log_area_ratio_std:.2f}), {self.time:.1f} s")
+        return (f"{self.method} embedding: {self.flow_steps} flow steps, folds "
+                f"{self.folds_after_flow} -> {self.folds_after_repair}, log area ratio std "
+                f"{self.log_area_ratio_std:.2f} [{self.log_area_ratio_min:.2f}, "
+                f"{self.log_area_ratio_max:.2f}] (conformal "
+                f"{self.conformal_log_area_ratio_std:.2f}), stretch p99 "
+                f"{self.stretch_p99:.2f}, {self.time:.1f} s")
 
 
 def _mobius(P, a):
@@ -222,25 +249,39 @@ def _cmcf(V, F, tau, max_steps, round_tol):
     return P, step, devs[-1] if devs else 0.0
 
 
-def spherical_embedding(V, F, *, equalise: float = 1.0, tau: float = 1e-2,
+def _stretch_p99(V, F, P, area):
+    """Area-weighted 99th percentile of the per-face stretch."""
+    sig = stretch(V, F, P)
+    order = np.argsort(sig)
+    cum = np.cumsum(area[order]) / area.sum()
+    return float(sig[order][np.searchsorted(cum, 0.99)]), float(sig.max())
+
+
+BALANCE = ("auto", "none", "stretch", "density")
+
+
+def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
                         max_steps: int = 300, round_tol: float = 5e-3,
-                        max_repair_rounds: int = 30, grid_level: int = 5,
-                        verbose: bool = False):
+                        max_repair_rounds: int = 30, stretch_iterations: int = 80,
+                        grid_level: int = 5, verbose: bool = False):
     """Map the vertices of a closed genus-0 mesh bijectively to the unit sphere.
 
-    Conformalized mean curvature flow, central projection, Möbius centring of the surface area,
-    repair of any folds, then (``equalise > 0``) a density-equalising flow towards equal areas;
-    see the module docstring for the equations. The result is fold-free: every spherical
-    triangle has ``det[a, b, c] > 0`` and the geodesic triangles tile the sphere exactly once.
+    Conformalized mean curvature flow, central projection, Möbius centring of the surface area
+    and repair of any folds give a conformal embedding; area balancing then moves it towards an
+    equiareal one (see the module docstring). The result is fold-free: every spherical triangle
+    has ``det[a, b, c] > 0`` and the geodesic triangles tile the sphere exactly once.
 
     Parameters
     ----------
     V : (n, 3) float array
     F : (m, 3) int array, a mesh that passes :func:`sns_np.mesh.check`
-    equalise : float in [0, 1]
-        Strength of the area equalisation: the final sphere areas are about
-        ``s_conformal^(1 - equalise) * A^equalise`` (0: keep the conformal map; 1: aim at
-        equal area ratios, resolved down to the density grid).
+    balance : {"auto", "none", "stretch", "density"}
+        ``"none"``: the conformal map. ``"stretch"``: followed by stretch-energy minimisation
+        (:func:`~sns_np.mesh.stretch.minimise_stretch`). ``"density"``: followed by that and a
+        density-equalising flow (:func:`~sns_np.mesh.equalise.equalise_areas`). ``"auto"``:
+        compute all three and return the one with the smallest 99th-percentile stretch
+        (largest singular value of the sphere-to-surface map, area-weighted), the quantity that
+        limits how well a network on the sphere can fit the surface.
     tau : float
         Time step of the flow, relative to the mesh normalised to unit area.
     max_steps : int
@@ -251,8 +292,10 @@ def spherical_embedding(V, F, *, equalise: float = 1.0, tau: float = 1e-2,
     max_repair_rounds : int
         Rounds of Tutte region repair; round ``k`` grows the folded triangles by ``k + 1``
         rings.
+    stretch_iterations : int
+        Weight updates of the stretch minimisation.
     grid_level : int
-        Icosphere level of the density grid of the area equalisation.
+        Icosphere level of the density grid of the density-equalising flow.
     verbose : bool
         Print one line per stage to stderr.
 
@@ -277,20 +320,19 @@ def spherical_embedding(V, F, *, equalise: float = 1.0, tau: float = 1e-2,
     --------
     >>> from sns_np.mesh import icosphere
     >>> V, F = icosphere(3)
-    >>> Vs, report = spherical_embedding(V * [1.0, 2.0, 3.0], F, grid_level=3)
+    >>> Vs, report = spherical_embedding(V * [1.0, 2.0, 3.0], F, balance="stretch")
     >>> report.folds_after_repair, Vs.shape
     (0, (642, 3))
     """
     t0 = time.perf_counter()
     V, F = as_mesh(V, F)
     check(V, F)
-    equalise = check_positive_float(equalise, "equalise", allow_zero=True)
-    if equalise > 1:
-        raise ValueError(f"equalise must be in [0, 1], got {equalise}")
+    check_choice(balance, "balance", BALANCE)
     tau = check_positive_float(tau, "tau")
     max_steps = check_positive_int(max_steps, "max_steps")
     round_tol = check_positive_float(round_tol, "round_tol")
     max_repair_rounds = check_positive_int(max_repair_rounds, "max_repair_rounds", minimum=0)
+    stretch_iterations = check_positive_int(stretch_iterations, "stretch_iterations", minimum=0)
     grid_level = check_positive_int(grid_level, "grid_level", minimum=1)
 
     def say(msg):
@@ -314,27 +356,39 @@ def spherical_embedding(V, F, *, equalise: float = 1.0, tau: float = 1e-2,
             f"spherical embedding still has {folds_end} folded triangle(s) after "
             f"{max_repair_rounds} repair rounds (flow: {folds_flow}, after centring: "
             f"{folds_centre}); try a smaller tau or more max_repair_rounds")
+    area = face_areas(V, F)
     d_conf = area_distortion(V, F, P)
-    eq_steps, eq_time = 0, 0.0
-    if equalise > 0:
-        t1 = time.perf_counter()
-        P, info = equalise_areas(V, F, P, strength=equalise, grid_level=grid_level,
-                                 repair=repair)
-        eq_steps, eq_time = info["steps"], time.perf_counter() - t1
-        say(f"area equalisation: {eq_steps} steps")
+    candidates = {"conformal": P}
+    n_stretch = n_density = 0
+    if balance != "none":
+        Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations, repair=repair)
+        candidates["stretch"], n_stretch = Ps, info["accepted"]
+        say(f"stretch minimisation: {n_stretch} steps, log area ratio std {info['spread']:.2f}")
+        if balance in ("auto", "density"):
+            Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
+            candidates["density"], n_density = Pd, info["steps"]
+            say(f"density equalisation: {n_density} steps")
+    scores = {k: _stretch_p99(V, F, X, area) for k, X in candidates.items()}
+    if balance == "auto":
+        method = min(scores, key=lambda k: scores[k][0])
+    else:
+        method = {"none": "conformal"}.get(balance, balance)
+    P = candidates[method]
     total = spherical_triangle_areas(P, F).sum()
     if (orientation_determinants(P, F) <= 0).any() or not abs(total - 4 * np.pi) < 1e-6:
         raise EmbeddingError(
             f"the spherical triangles cover an area of {total:.6g} instead of 4 pi = "
             f"{4 * np.pi:.6g}: the embedding is not one-to-one")
     d = area_distortion(V, F, P)
+    say(f"chose the {method} candidate (stretch p99 {scores[method][0]:.2f})")
     return P, EmbeddingReport(
-        n_vertices=V.shape[0], n_faces=F.shape[0], flow_steps=steps, roundness=roundness,
-        folds_after_flow=folds_flow, folds_after_centring=folds_centre,
+        n_vertices=V.shape[0], n_faces=F.shape[0], method=method, flow_steps=steps,
+        roundness=roundness, folds_after_flow=folds_flow, folds_after_centring=folds_centre,
         folds_after_repair=folds_end, repair_rounds=rounds, repaired_vertices=n_moved,
-        centring_iterations=it_centre, equalise_steps=eq_steps, equalise_time=eq_time,
+        centring_iterations=it_centre, stretch_iterations=n_stretch, density_steps=n_density,
         conformal_log_area_ratio_std=float(d_conf.std()),
         conformal_log_area_ratio_min=float(d_conf.min()),
         log_area_ratio_mean=float(d.mean()), log_area_ratio_std=float(d.std()),
         log_area_ratio_min=float(d.min()), log_area_ratio_max=float(d.max()),
-        time=time.perf_counter() - t0)
+        stretch_p99=scores[method][0], stretch_max=scores[method][1],
+        candidates={k: v[0] for k, v in scores.items()}, time=time.perf_counter() - t0)

@@ -19,6 +19,7 @@ __all__ = [
     "orientation_determinants",
     "spherical_triangle_areas",
     "area_distortion",
+    "stretch",
     "SphereLocator",
 ]
 
@@ -239,3 +240,49 @@ class SphereLocator:
             f = int(np.argmax(beta.min(axis=1)))
             best_f[i], best_b[i], best_m[i] = f, beta[f], beta[f].min()
         return best_f, best_b, best_m
+
+
+def stretch(V, F, Vs) -> np.ndarray:
+    """Largest singular value, per face, of the linear map from sphere triangle to surface.
+
+    Both sides are normalised to total area ``4 pi``, so the value is 1 everywhere for an
+    isometry of the unit sphere; large values flag faces where the surface is stretched
+    relative to its image on the sphere (a network fitted on the sphere must vary fast there).
+    The sphere side is the chord triangle.
+
+    Parameters
+    ----------
+    V : (n, 3) float array, the surface
+    F : (m, 3) int array
+    Vs : (n, 3) float array, a fold-free spherical embedding
+
+    Returns
+    -------
+    sigma : (m,) float array
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(3)
+    >>> s = stretch(V * [1.0, 1.0, 2.0], F, V)
+    >>> bool(s.min() > 0.7 and s.max() < 2.0)
+    True
+    """
+    V, F = as_mesh(V, F)
+
+    def frames(X):
+        a, b = X[F[:, 1]] - X[F[:, 0]], X[F[:, 2]] - X[F[:, 0]]
+        e1 = a / np.linalg.norm(a, axis=1, keepdims=True)
+        n = np.cross(a, b)
+        e2 = np.cross(n / np.linalg.norm(n, axis=1, keepdims=True), e1)
+        # 2 x 2 matrix whose columns are the edge vectors a, b in the frame (e1, e2)
+        return np.stack([np.stack([np.einsum("ij,ij->i", a, e1), np.zeros(len(F))], 1),
+                         np.stack([np.einsum("ij,ij->i", b, e1),
+                                   np.einsum("ij,ij->i", b, e2)], 1)], axis=2)
+
+    A_surf = face_areas(V, F).sum()
+    A_sph = face_areas(Vs, F).sum()
+    T = frames(V) * np.sqrt(4 * np.pi / A_surf)
+    S = frames(Vs) * np.sqrt(4 * np.pi / A_sph)
+    J = T @ np.linalg.inv(S)
+    return np.linalg.svd(J, compute_uv=False)[:, 0]
