@@ -112,14 +112,12 @@ def minimise_stretch(V, F, Vs, *, iterations: int = 30, gamma: float = 0.5,
 
     Examples
     --------
-    >>> import numpy as np
-    >>> from sns_np.mesh import icosphere
+    >>> from sns_np.mesh import area_distortion, icosphere
     >>> V, F = icosphere(3)
-    >>> X = V * [1.0, 1.0, 3.0]
-    >>> Vs, info = minimise_stretch(X, F, V, iterations=5)
-    >>> info["spread"] < 0.5 * float(np.log(
-    ...     spherical_triangle_areas(V, F) / face_areas(X, F)).std())
-    True
+    >>> X = V * [1.0, 1.0, 3.0]                  # radial projection crowds the poles' area
+    >>> Vs, info = minimise_stretch(X, F, V, iterations=20)
+    >>> round(float(area_distortion(X, F, V).std()), 2), round(info["spread"], 2)
+    (0.26, 0.02)
     """
     if repair is None:
         repair = FoldRepair(V, F)
