@@ -1,11 +1,12 @@
 """Neural scalar fields on the sphere and the eigenfunction losses with their parameter gradients.
 
-A :class:`NeuralField` is the reference's scalar-field network (paper Sec. 7: a residual
-softplus MLP ``R^3 -> R^3`` of width 10 with 2 residual blocks, the scalar being the mean of
-the 3 outputs), evaluated at sphere points. It follows the field protocol of DESIGN.md, with
-ambient value, gradient and Hessian; the surface field is ``h(S(p)) = g(p)`` (paper Eq. 17).
+A :class:`NeuralField` is the reference's scalar-field network (paper Sec. 6, implementation
+details: a residual softplus MLP ``R^3 -> R^3`` of width 10 with 2 residual blocks, the scalar
+being the mean of the 3 outputs), evaluated at sphere points. It follows the field protocol
+of DESIGN.md, with ambient value, gradient and Hessian; the surface field is
+``h(S(p)) = g(p)`` (paper Eq. 23).
 
-The eigenfunction losses (paper Eqs. 21-24) on a :class:`~sns_np.sampling.SurfaceSample`
+The eigenfunction losses (paper Eqs. 25-27) on a :class:`~sns_np.sampling.SurfaceSample`
 with weights ``w_i`` (``integral over S of f dA ~= sum w_i f_i``):
 
     Q     = E / N2,  E = sum w_i G_i^T I_i^-1 G_i,  N2 = sum w_i g_i^2,  G_i = R_i^T grad g(p_i)
@@ -198,7 +199,7 @@ def eigen_loss(field: NeuralField, sample: SurfaceSample, previous=None,
                lambda_ortho: float = 0.0, lambda_reg: float = 0.0, *, rayleigh: float = 1.0):
     """``rayleigh * Q + lambda_ortho * ortho + lambda_reg * reg`` and its parameter gradient.
 
-    The eigenfunction loss of paper Eq. 24 (see the module notes for the terms).
+    The eigenfunction loss of paper Eq. 27 (see the module notes for the terms).
 
     Parameters
     ----------
@@ -269,13 +270,13 @@ def rayleigh_loss(field: NeuralField, sample: SurfaceSample):
 
 
 def orthogonality_loss(field: NeuralField, sample: SurfaceSample, previous):
-    """``sum_j <h, phi_j>^2`` (paper Eq. 21) and its gradient; ``previous`` (n, k) as in
+    """``sum_j <h, phi_j>^2`` (paper Eq. 25) and its gradient; ``previous`` (n, k) as in
     :func:`eigen_loss`."""
     loss, grad = eigen_loss(field, sample, previous, lambda_ortho=1.0, rayleigh=0.0)
     return loss.ortho, grad
 
 
 def unit_norm_loss(field: NeuralField, sample: SurfaceSample):
-    """``(||h|| - 1)^2`` (paper Eq. 23) and its gradient."""
+    """``(||h|| - 1)^2`` (paper Eq. 26) and its gradient."""
     loss, grad = eigen_loss(field, sample, lambda_reg=1.0, rayleigh=0.0)
     return loss.reg, grad

@@ -1,6 +1,6 @@
 """Sphere sampling, rejection sampling by area element, and integrals over a surface map.
 
-Every surface integral is a weighted sum over sphere points ``p_i`` (paper Sec. 5):
+Every surface integral is a weighted sum over sphere points ``p_i`` (paper Eq. 28, Sec. 5):
 
     integral over S of h dA  ~=  sum_i w_i g(p_i),          h(S(p)) = g(p),
 
@@ -258,7 +258,7 @@ class SurfaceSample:
     def dirichlet_density(self, field, domain: str = "sphere"):
         """``|grad_S h|^2 = (R^T grad g)^T I^-1 (R^T grad g)`` (n,), and ``g`` (n,).
 
-        The surface gradient of ``h(S(p)) = g(p)`` is ``J R I^-1 R^T grad g`` (paper Sec. 5,
+        The surface gradient of ``h(S(p)) = g(p)`` is ``J R I^-1 R^T grad g`` (paper Eq. 24,
         ``grad h = (J^T)^-1 grad g`` restricted to the tangent plane), so its squared length
         needs only the precomputed ``R`` and ``I^-1``.
         """
@@ -510,7 +510,7 @@ def integrate(surface, field, n: int = 100_000, method: str = "mc", rng=None, *,
 
 def inner_product(surface, f, g, n: int = 100_000, method: str = "mc", rng=None, *,
                   sample: SurfaceSample | None = None) -> Estimate:
-    """``<f, g>_{L^2(S)} = integral over S of f g dA`` (paper Sec. 3.4).
+    """``<f, g>_{L^2(S)} = integral over S of f g dA`` (paper Eq. 18).
 
     Examples
     --------
@@ -526,7 +526,8 @@ def inner_product(surface, f, g, n: int = 100_000, method: str = "mc", rng=None,
 
 def l2_norm(surface, f, n: int = 100_000, method: str = "mc", rng=None, *,
             sample: SurfaceSample | None = None) -> Estimate:
-    """``||f||_{L^2(S)} = sqrt(integral f^2 dA)``; ``se = se(integral f^2) / (2 ||f||)``.
+    """``||f||_{L^2(S)} = sqrt(integral f^2 dA)`` (paper Eq. 19), with
+    ``se = se(integral f^2) / (2 ||f||)``.
 
     Examples
     --------

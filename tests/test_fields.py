@@ -88,7 +88,10 @@ def test_loss_gradients_match_central_differences(sample, which):
             return orthogonality_loss(f, sample, P)
         return unit_norm_loss(f, sample)
 
-    assert check_gradient(fun, f.net.pack(), h=1e-5, richardson=True) < 1e-7
+    # every parameter with the JIT; 3 random directions without it (pure Python is slow)
+    nd = 3 if NOJIT else None
+    assert check_gradient(fun, f.net.pack(), h=1e-5, n_directions=nd, rng=1,
+                          richardson=True) < 1e-7
 
 
 def test_loss_gradient_on_the_blas_path(sample):
@@ -101,7 +104,7 @@ def test_loss_gradient_on_the_blas_path(sample):
         loss, grad = eigen_loss(f, sample, P, lambda_ortho=5.0, lambda_reg=1.0)
         return loss.total, grad
 
-    assert check_gradient(fun, f.net.pack(), h=1e-5, n_directions=12, rng=0,
+    assert check_gradient(fun, f.net.pack(), h=1e-5, n_directions=3 if NOJIT else 12, rng=0,
                           richardson=True) < 1e-7
 
 
@@ -119,6 +122,7 @@ def test_loss_terms_agree_with_the_sampling_estimators(sample):
     assert abs(loss.total - (q + 2.0 * (c @ c) + 3.0 * (norm - 1) ** 2)) < 1e-10
 
 
+@pytest.mark.slow_nojit
 def test_rayleigh_loss_matches_spherical_harmonic_spectrum_on_sphere():
     # Parseval on the unit sphere: Q(g) = sum l(l+1) c_lm^2 / sum c_lm^2 (an independent
     # route through the harmonic coefficients of the field, no derivatives of the network)

@@ -129,6 +129,7 @@ def test_ritz_convergence_indicator_and_fixed_degree():
     assert not res.converged
 
 
+@pytest.mark.slow_nojit
 def test_ritz_on_a_fitted_neural_surface_matches_fem_of_its_mesh():
     from sns_np.surface import fit_shape
 
@@ -156,6 +157,7 @@ def test_eigenmodes_on_mesh_exports_per_vertex_fields():
 
 # ------------------------------------------------------------------------------ neural
 
+@pytest.mark.slow_nojit
 def test_neural_smoke_shapes_normalisation_and_seed():
     kw = dict(steps=30, n_train=600, batch=256, n_eval=4000)
     res = eigenmodes(Sphere(), 2, method="neural", rng=1, **kw)
@@ -184,6 +186,7 @@ def test_neural_unit_sphere_first_three_within_3_percent():
     assert np.all(captured > 0.97)
 
 
+@pytest.mark.slow_nojit
 def test_neural_divergence_stops_and_keeps_the_last_good_state(monkeypatch):
     import sns_np.spectral.neural as neural
 

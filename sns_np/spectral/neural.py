@@ -1,6 +1,6 @@
 """The paper's neural eigenmodes: one small network per mode, trained sequentially (Sec. 5).
 
-Mode ``i`` is a :class:`~sns_np.fields.NeuralField` ``g_i`` minimising (paper Eq. 24)
+Mode ``i`` is a :class:`~sns_np.fields.NeuralField` ``g_i`` minimising (paper Eq. 27)
 
     L = Q(h) + lambda_ortho (<h, phi_0>^2 + sum_{j<i} <h, phi_j>^2) + lambda_reg (||h|| - 1)^2
 
@@ -34,7 +34,7 @@ to unit ``L^2(S)`` norm on that sample.
 References
 ----------
 T. Williamson and N. J. Mitra, "Neural Geometry Processing via Spherical Neural Surfaces",
-Eurographics 2025, Sec. 5 and 7.
+Eurographics 2025, Sec. 5 and 6.
 D. P. Kingma and J. Ba, "Adam: A method for stochastic optimization", ICLR 2015.
 """
 
