@@ -44,9 +44,9 @@ from .spectrum import eigenvalues, laplacian_eigenmodes
 from .spherical import (
     SphereLocator,
     area_distortion,
+    face_stretch,
     orientation_determinants,
     spherical_triangle_areas,
-    stretch,
 )
 from .stretch import minimise_stretch
 
@@ -62,7 +62,7 @@ __all__ = [
     # spherical embedding
     "spherical_embedding", "EmbeddingReport", "mobius_centre", "minimise_stretch",
     "equalise_areas", "FoldRepair", "orientation_determinants", "spherical_triangle_areas",
-    "area_distortion", "stretch",
+    "area_distortion", "face_stretch",
     # correspondence
     "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator",
     # errors

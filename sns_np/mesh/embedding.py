@@ -59,9 +59,9 @@ from .foldrepair import FoldRepair
 from .operators import cotan_laplacian, face_areas, mass_matrix
 from .spherical import (
     area_distortion,
+    face_stretch,
     orientation_determinants,
     spherical_triangle_areas,
-    stretch,
 )
 from .stretch import minimise_stretch
 
@@ -96,8 +96,8 @@ class EmbeddingReport:
     stretch_p99, stretch_max : float
         99th percentile (weighted by surface area) and maximum over faces of the largest
         singular value of the sphere-to-surface map, both normalised to area ``4 pi``
-        (:func:`sns_np.mesh.spherical.stretch`); the candidate with the smallest ``stretch_p99``
-        is returned.
+        (:func:`sns_np.mesh.spherical.face_stretch`); the candidate with the smallest
+        ``stretch_p99`` is returned.
     candidates : dict
         ``stretch_p99`` of every candidate computed.
     time : float
@@ -251,7 +251,7 @@ def _cmcf(V, F, tau, max_steps, round_tol):
 
 def _stretch_p99(V, F, P, area):
     """Area-weighted 99th percentile of the per-face stretch."""
-    sig = stretch(V, F, P)
+    sig = face_stretch(V, F, P)
     order = np.argsort(sig)
     cum = np.cumsum(area[order]) / area.sum()
     return float(sig[order][np.searchsorted(cum, 0.99)]), float(sig.max())

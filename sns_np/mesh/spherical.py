@@ -19,7 +19,7 @@ __all__ = [
     "orientation_determinants",
     "spherical_triangle_areas",
     "area_distortion",
-    "stretch",
+    "face_stretch",
     "SphereLocator",
 ]
 
@@ -242,7 +242,7 @@ class SphereLocator:
         return best_f, best_b, best_m
 
 
-def stretch(V, F, Vs) -> np.ndarray:
+def face_stretch(V, F, Vs) -> np.ndarray:
     """Largest singular value, per face, of the linear map from sphere triangle to surface.
 
     Both sides are normalised to total area ``4 pi``, so the value is 1 everywhere for an
@@ -264,7 +264,7 @@ def stretch(V, F, Vs) -> np.ndarray:
     --------
     >>> from sns_np.mesh import icosphere
     >>> V, F = icosphere(3)
-    >>> s = stretch(V * [1.0, 1.0, 2.0], F, V)
+    >>> s = face_stretch(V * [1.0, 1.0, 2.0], F, V)
     >>> bool(s.min() > 0.7 and s.max() < 2.0)
     True
     """
