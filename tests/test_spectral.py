@@ -171,6 +171,16 @@ def test_neural_smoke_shapes_normalisation_and_seed():
     assert np.array_equal(res.eigenvalues, again.eigenvalues)
 
 
+@pytest.mark.slow_nojit
+def test_neural_time_budget_stops_training_and_says_so():
+    with pytest.warns(RuntimeWarning, match="time budget"):
+        res = eigenmodes(Sphere(), 1, method="neural", steps=100_000, time_budget=0.3,
+                         n_train=500, batch=128, n_eval=1000)
+    assert not res.converged
+    log = res.info["logs"][0]
+    assert log["stopped"] == "time_budget" and 0 < log["steps"] < 100_000
+
+
 @pytest.mark.slow
 @pytest.mark.slow_nojit
 def test_neural_unit_sphere_first_three_within_3_percent():

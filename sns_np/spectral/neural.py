@@ -104,6 +104,7 @@ def _train_mode(i, surface_pool, previous, gen, o, deadline, bar, k):
     q_run = None
     log = {"loss": [], "rayleigh": [], "stopped": "steps"}
     t0 = time.perf_counter()
+    done = 0
     for t in range(o["steps"]):
         if deadline is not None and time.perf_counter() > deadline:
             log["stopped"] = "time_budget"
@@ -124,15 +125,16 @@ def _train_mode(i, surface_pool, previous, gen, o, deadline, bar, k):
             ok = False
         if not ok:
             theta[...] = last_good
+            kept = f"those of step {t - 1}, the last" if t else "the initial ones, the only"
             exc = DivergenceError(
                 f"neural eigenmode {i + 1}: the loss or its gradient became non-finite at "
-                f"step {t}; the field's parameters were restored to those of step {t - 1}, the "
-                f"last with a finite loss and gradient. Lower lr (now {o['lr']:g}) or the "
-                f"initial coefficients")
+                f"step {t}; the field's parameters were restored to {kept} with a finite loss "
+                f"and gradient. Lower lr (now {o['lr']:g}) or the initial coefficients")
             exc.field = field
             raise exc
         last_good[...] = theta
         opt.step(theta, grad)
+        done += 1
         q_run = loss.rayleigh if q_run is None else 0.9 * q_run + 0.1 * loss.rayleigh
         if t % 50 == 0 or t == o["steps"] - 1:
             log["loss"].append(loss.total)
@@ -145,7 +147,7 @@ def _train_mode(i, surface_pool, previous, gen, o, deadline, bar, k):
                               f"restored to the last finite state")
         exc.field = field
         raise exc
-    log["steps"] = t + 1 if o["steps"] else 0
+    log["steps"] = done
     log["seconds"] = time.perf_counter() - t0
     return field, log
 
