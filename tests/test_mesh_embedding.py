@@ -16,6 +16,7 @@ from sns_np.mesh import (
     spherical_embedding,
     spherical_triangle_areas,
 )
+from sns_np.mesh.foldrepair import tutte_sphere
 
 from .test_mesh_helpers import ellipsoid, torus
 
@@ -154,6 +155,28 @@ def test_minimise_stretch_reduces_distortion_monotonically():
         assert info["spread"] <= prev + 1e-12
         prev = info["spread"]
     assert prev < 0.3 * d0
+
+
+def test_tutte_sphere_is_fold_free_even_on_spiky_meshes():
+    g = np.random.default_rng(0)
+    for level in (0, 2, 3):
+        V, F = icosphere(level)
+        X = V * np.exp(g.uniform(-1.5, 1.5, 3)) * np.exp(0.3 * g.standard_normal((len(V), 1)))
+        assert_bijective(tutte_sphere(X, F), F)
+
+
+def test_unrepairable_conformal_maps_fall_back_to_tutte():
+    # a flattened icosahedron and a spiky cigar: the conformal flow's projection folds beyond
+    # local repair (negative cotangents, coarse faces); the result must still be bijective
+    g = np.random.default_rng(3)
+    V0, F0 = icosphere(0)
+    V3, F3 = icosphere(3)
+    spiky = V3 * np.exp(0.3 * g.standard_normal((len(V3), 1))) * [0.4, 0.7, 2.5]
+    for V, F in ((V0 * [1.5, 0.5, 0.25], F0), (spiky, F3)):
+        Vs, rep = spherical_embedding(V, F)
+        assert_bijective(Vs, F)
+        assert "tutte" in rep.candidates and "conformal" not in rep.candidates
+        assert rep.stretch_p99 < 0.5 * rep.candidates["tutte"] or len(F) == 20
 
 
 def test_equalise_areas_reduces_distortion_and_keeps_folds_away():

@@ -135,9 +135,9 @@ def test_write_with_point_data(tmp_path):
     V, F = icosphere(1)
     write_mesh(tmp_path / "d.ply", V, F, {"H": np.ones(len(V))})
     assert "H" in meshio.read(tmp_path / "d.ply").point_data
-    with pytest.raises(MeshFileError, match="OBJ cannot hold"):
+    with pytest.raises(ValueError, match="cannot store per-vertex fields"):
         write_mesh(tmp_path / "d.obj", V, F, {"H": np.ones(len(V))})
-    with pytest.raises(MeshFileError, match="point data 'H'"):
+    with pytest.raises(ValueError, match="point field 'H'"):
         write_mesh(tmp_path / "d.vtu", V, F, {"H": np.ones(3)})
 
 

@@ -27,9 +27,10 @@ from .errors import (
     OrientationError,
     UnreferencedVertexError,
 )
+from .export import write_mesh
 from .foldrepair import FoldRepair
 from .icosphere import icosphere
-from .io import LoadReport, load, write_mesh
+from .io import LoadReport, load
 from .operators import (
     cotan_laplacian,
     face_angles,

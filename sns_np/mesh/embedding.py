@@ -55,7 +55,7 @@ from ._arrays import as_mesh
 from .check import check
 from .equalise import equalise_areas
 from .errors import EmbeddingError
-from .foldrepair import FoldRepair
+from .foldrepair import FoldRepair, tutte_sphere
 from .operators import cotan_laplacian, face_areas, mass_matrix
 from .spherical import (
     area_distortion,
@@ -75,7 +75,9 @@ class EmbeddingReport:
     Attributes
     ----------
     method : str
-        The returned candidate: ``"conformal"``, ``"stretch"`` or ``"density"``.
+        The returned candidate: ``"conformal"``, ``"stretch"`` or ``"density"`` (or
+        ``"tutte"`` when the conformal map could not be repaired and the Tutte fallback of
+        :func:`~sns_np.mesh.foldrepair.tutte_sphere` was balanced instead).
     flow_steps : int
         Conformalized mean curvature flow steps taken.
     roundness : float
@@ -89,7 +91,7 @@ class EmbeddingReport:
     stretch_iterations, density_steps : int
         Accepted stretch-minimisation steps and density-flow steps (0 when not run).
     conformal_log_area_ratio_std, conformal_log_area_ratio_min : float
-        Area distortion of the conformal map.
+        Area distortion of the conformal map (of the Tutte fallback, when used).
     log_area_ratio_mean, log_area_ratio_std, log_area_ratio_min, log_area_ratio_max : float
         Statistics over faces of ``log((s_f / sum s) / (A_f / sum A))`` with ``s_f`` the
         spherical and ``A_f`` the surface triangle area (0 everywhere for an area-preserving map).
@@ -351,14 +353,21 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
         rounds, n_moved = repair(P, max_repair_rounds)
         say(f"fold repair: {folds_centre} folds, {n_moved} vertices moved")
     folds_end = int((orientation_determinants(P, F) <= 0).sum())
+    base = "conformal"
     if folds_end:
-        raise EmbeddingError(
-            f"spherical embedding still has {folds_end} folded triangle(s) after "
-            f"{max_repair_rounds} repair rounds (flow: {folds_flow}, after centring: "
-            f"{folds_centre}); try a smaller tau or more max_repair_rounds")
+        # coarse or spiky meshes (negative cotangents) can fold beyond local repair: start
+        # instead from a Tutte embedding, fold-free by construction, and let balancing fix it
+        say(f"{folds_end} folds left after repair; falling back to a Tutte embedding")
+        P, base = tutte_sphere(V, F, repair.W), "tutte"
+        folds_end = int((orientation_determinants(P, F) <= 0).sum())
+        if folds_end:
+            raise EmbeddingError(
+                f"spherical embedding still has {folds_end} folded triangle(s) after "
+                f"{max_repair_rounds} repair rounds and the Tutte fallback (flow: "
+                f"{folds_flow}, after centring: {folds_centre})")
     area = face_areas(V, F)
     d_conf = area_distortion(V, F, P)
-    candidates = {"conformal": P}
+    candidates = {base: P}
     n_stretch = n_density = 0
     if balance != "none":
         Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations, repair=repair)
@@ -372,7 +381,7 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
     if balance == "auto":
         method = min(scores, key=lambda k: scores[k][0])
     else:
-        method = {"none": "conformal"}.get(balance, balance)
+        method = {"none": base}.get(balance, balance)
     P = candidates[method]
     total = spherical_triangle_areas(P, F).sum()
     if (orientation_determinants(P, F) <= 0).any() or not abs(total - 4 * np.pi) < 1e-6:

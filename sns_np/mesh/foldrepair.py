@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .spherical import orientation_determinants
 
-__all__ = ["FoldRepair"]
+__all__ = ["FoldRepair", "mean_value_weights", "tutte_sphere"]
 
 
 def mean_value_weights(V, F) -> sp.csr_matrix:
@@ -99,12 +99,16 @@ class FoldRepair:
             return False
         uj, uk = chart(P[j]), chart(P[k])
         scale = np.abs(np.concatenate([uj, uk])).max()
+        if not (np.isfinite(scale) and scale > 0):
+            return False
         uj, uk = uj / scale, uk / scale
         d = uk - uj
         nd = np.linalg.norm(d, axis=1)
         # cross(d, x - uj) = d0 x1 - d1 x0 - cross(d, uj) >= t |d|
         A_ub = np.stack([d[:, 1], -d[:, 0], nd], axis=1)
         b_ub = -(d[:, 0] * uj[:, 1] - d[:, 1] * uj[:, 0])
+        if not (np.all(np.isfinite(A_ub)) and np.all(np.isfinite(b_ub))):
+            return False
         res = linprog([0.0, 0.0, -1.0], A_ub=A_ub, b_ub=b_ub,
                       bounds=[(None, None), (None, None), (None, 1.0)], method="highs")
         if res.status != 0 or res.x[2] <= 0:
@@ -144,6 +148,8 @@ class FoldRepair:
         Wi = self.W[inside]
         K = sp.identity(inside.size, format="csc") - Wi[:, inside].tocsc()
         u = np.asarray(spla.spsolve(K, Wi[:, boundary] @ ub)).reshape(-1, 2)
+        if not np.all(np.isfinite(u)):
+            return False
         X = c + u[:, :1] * e1 + u[:, 1:] * e2
         P[inside] = X / np.linalg.norm(X, axis=1, keepdims=True)
         return True
@@ -212,3 +218,63 @@ class FoldRepair:
         if self.bad_faces(P, flatness).any():
             return max_rounds + 1, int(moved.sum())
         return max_rounds, int(moved.sum())
+
+
+def _one_ring(F, v):
+    """The neighbours of vertex ``v`` in cyclic order (counter-clockwise seen from outside)."""
+    faces = F[(F == v).any(axis=1)]
+    k = np.argmax(faces == v, axis=1)
+    a = faces[np.arange(len(faces)), (k + 1) % 3]
+    b = faces[np.arange(len(faces)), (k + 2) % 3]
+    nxt = dict(zip(a.tolist(), b.tolist()))
+    ring = [int(a[0])]
+    while len(ring) < len(a):
+        ring.append(nxt[ring[-1]])
+    return np.array(ring)
+
+
+def tutte_sphere(V, F, W=None, cap_degrees: float = 75.0) -> np.ndarray:
+    """A fold-free spherical embedding by Tutte's method in a gnomonic chart.
+
+    The vertex ``v0`` of largest valence goes to the north pole; its neighbours are placed, in
+    order and spaced by edge length, on the circle of gnomonic radius ``tan(cap_degrees)``
+    about the south pole, and every other vertex by Tutte's barycentric method with positive
+    (mean-value) weights. The gnomonic projection maps great circles to straight lines, so each
+    spherical triangle of the cap has the orientation of its planar image, which Tutte's theorem
+    (Floater 2003, for a strictly convex boundary and positive weights) makes positive; the
+    triangles around ``v0`` are positive because the ring turns once around the pole. This is
+    the fallback when the conformal route cannot be repaired; its area distortion is large until
+    the balancing stage evens it out.
+
+    Parameters
+    ----------
+    V : (n, 3) float array
+    F : (m, 3) int array, closed, genus 0, outward
+    W : sparse (n, n), optional, row-normalised positive weights (mean-value by default)
+    cap_degrees : float in (0, 90)
+
+    Returns
+    -------
+    Vs : (n, 3) float array, unit vectors
+    """
+    n = V.shape[0]
+    W = mean_value_weights(V, F) if W is None else W
+    v0 = int(np.argmax(np.bincount(F.ravel(), minlength=n)))
+    ring = _one_ring(F, v0)
+    seg = np.linalg.norm(V[np.roll(ring, -1)] - V[ring], axis=1)
+    theta = 2 * np.pi * np.concatenate([[0.0], np.cumsum(seg)[:-1]]) / seg.sum()
+    R = np.tan(np.radians(cap_degrees))
+    U = np.zeros((n, 2))
+    U[ring] = R * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    inner = np.setdiff1d(np.arange(n), np.concatenate([[v0], ring]))
+    if inner.size:
+        Wi = W[inner]
+        K = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
+        U[inner] = np.asarray(spla.spsolve(K, Wi[:, ring] @ U[ring])).reshape(-1, 2)
+    for mirror in (1.0, -1.0):
+        X = np.column_stack([U[:, 0], mirror * U[:, 1], -np.ones(n)])
+        X[v0] = [0.0, 0.0, 1.0]
+        X /= np.linalg.norm(X, axis=1, keepdims=True)
+        if (orientation_determinants(X, F) > 0).sum() > F.shape[0] // 2:
+            return X
+    return X

@@ -19,7 +19,7 @@ import numpy as np
 from ._arrays import unique_edges
 from .errors import MeshFileError
 
-__all__ = ["LoadReport", "load", "write_mesh", "SUPPORTED_FORMATS"]
+__all__ = ["LoadReport", "load", "SUPPORTED_FORMATS"]
 
 SUPPORTED_FORMATS = (".obj", ".off", ".ply", ".stl")
 
@@ -318,73 +318,3 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
                         n_vertices=V.shape[0], n_faces=F.shape[0])
     return V, F, report
 
-
-def write_mesh(path, V, F, data=None) -> None:
-    """Write a triangle mesh, optionally with per-vertex data.
-
-    ``.obj`` is written here (``v`` and ``f`` lines; per-vertex data cannot be stored and is
-    rejected); ``.ply``, ``.off``, ``.stl`` and ``.vtu`` go through meshio (with ``data`` as
-    point data where the format supports it).
-
-    Parameters
-    ----------
-    path : str or path-like
-    V : (n, 3) float array
-    F : (m, 3) int array
-    data : dict of str -> (n,) or (n, k) array, optional
-
-    Raises
-    ------
-    MeshFileError
-        Unsupported extension, data that the format cannot hold, or an I/O failure.
-
-    Examples
-    --------
-    >>> import os, tempfile
-    >>> from sns_np.mesh import icosphere, load
-    >>> V, F = icosphere(1)
-    >>> path = os.path.join(tempfile.mkdtemp(), "ico.obj")
-    >>> write_mesh(path, V, F)
-    >>> load(path)[0].shape
-    (42, 3)
-    """
-    from ._arrays import as_mesh
-
-    V, F = as_mesh(V, F)
-    path = Path(path)
-    ext = path.suffix.lower()
-    allowed = (".obj", ".ply", ".off", ".stl", ".vtu")
-    if ext not in allowed:
-        raise MeshFileError(f"{path}: cannot write format {ext!r}; expected one of "
-                            f"{', '.join(allowed)}")
-    point_data = {}
-    for name, arr in (data or {}).items():
-        arr = np.asarray(arr)
-        if arr.shape[:1] != (V.shape[0],):
-            raise MeshFileError(f"{path}: point data {name!r} has shape {arr.shape}; expected "
-                                f"({V.shape[0]}, ...)")
-        point_data[name] = arr
-    try:
-        if ext == ".obj":
-            if point_data:
-                raise MeshFileError(f"{path}: OBJ cannot hold per-vertex data "
-                                    f"({', '.join(point_data)}); use .ply or .vtu")
-            with open(path, "w", encoding="utf-8") as fh:
-                fh.write("# written by sns_np\n")
-                np.savetxt(fh, V, fmt="v %.17g %.17g %.17g")
-                np.savetxt(fh, F + 1, fmt="f %d %d %d")
-            return
-        try:
-            import meshio
-        except ImportError as exc:
-            raise MeshFileError(f"{path}: writing {ext} needs meshio "
-                                "(pip install 'sns-np[meshes]')") from exc
-        if ext in (".off", ".stl") and point_data:
-            raise MeshFileError(f"{path}: {ext} cannot hold per-vertex data "
-                                f"({', '.join(point_data)}); use .ply or .vtu")
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            meshio.write(str(path), meshio.Mesh(V, [("triangle", F.astype(np.int32))],
-                                                point_data=point_data or None))
-    except OSError as exc:
-        raise MeshFileError(f"cannot write mesh file {path}: {exc}") from None
