@@ -101,6 +101,18 @@ def test_off_with_polygons_and_comments(tmp_path):
     assert check(V, F).volume == pytest.approx(1.0)
 
 
+def test_ply_with_quads(tmp_path):
+    pytest.importorskip("meshio")
+    head = ("ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 6\nproperty list uchar int vertex_indices\n"
+            "end_header\n")
+    body = ("0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n1 0 1\n1 1 1\n0 1 1\n"
+            "4 0 3 2 1\n4 4 5 6 7\n4 0 1 5 4\n4 1 2 6 5\n4 2 3 7 6\n4 3 0 4 7\n")
+    V, F, rep = load(_write(tmp_path / "cube.ply", head + body), return_report=True)
+    assert F.shape == (12, 3) and rep.n_polygons_triangulated == 6
+    assert check(V, F).volume == pytest.approx(1.0)
+
+
 @pytest.mark.parametrize("ext", [".ply", ".stl", ".off", ".obj", ".vtu"])
 def test_round_trip_through_formats(tmp_path, ext):
     V, F = icosphere(2)

@@ -180,6 +180,7 @@ class Correspondence:
         q : (n, 3) float array, the corresponding mesh points
         normals : (n, 3) float array, unit, barycentric interpolation of vertex normals
         """
+        n = check_positive_int(n, "n", minimum=0)
         g = as_generator(rng)
         face = _draw(self._cum, n, g)
         beta = uniform_barycentric(n, g)
