@@ -16,6 +16,7 @@ fields     neural scalar fields on the sphere
 spectral   Laplace-Beltrami eigenmodes
 flows      heat flow, mean curvature flow, SDF fitting
 testing    central-difference derivative checks
+quadrature deterministic sphere quadrature
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from ._version import __version__
 
 _SUBMODULES = {
     "nn", "geometry", "shapes", "mesh", "sampling", "fields", "spectral", "flows",
-    "testing", "protocol", "errors", "surface", "cli",
+    "testing", "protocol", "errors", "surface", "cli", "quadrature", "demo",
 }
 _ATTRS = {"SphericalNeuralSurface": "surface"}
 

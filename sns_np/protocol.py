@@ -144,7 +144,10 @@ def directional_jet(surface, p: np.ndarray, order: int, D: np.ndarray, second: i
     if not 0 <= k <= m:
         raise ValueError(f"second must be between 0 and {m}, got {second}")
     if offers_directions(surface):
-        out = surface.jet(p, order, directions=D, second=k)
+        if order == 2:
+            out = surface.jet(p, order, directions=D, second=k)
+        else:
+            out = surface.jet(p, order, directions=D)
         if not isinstance(out, tuple) or len(out) != order + 1:
             raise ShapeError(
                 f"{_name(surface)}.jet(p, {order}, directions=...) must return "

@@ -46,7 +46,7 @@ from .geometry import (
     metric_conditioning,
     tangent_frame,
 )
-from .protocol import chunk_slices, field_jet, offers_directions, surface_jet
+from .protocol import chunk_slices, directional_jet, field_jet
 
 __all__ = [
     "uniform_sphere", "fibonacci_sphere", "Estimate", "SurfaceSample", "surface_sample",
@@ -153,27 +153,8 @@ class Estimate:
 # ------------------------------------------------------------------------------ geometry
 
 def _tangent_jet(surface, p, R):
-    """``y`` (n, 3) and ``J R`` (n, 3, 2): a 2-direction jet when the map offers one.
-
-    Calls ``surface.jet(p, 1, directions=R)`` without ``second=``, which order-1 jets of
-    :class:`~sns_np.nn.ResidualMLP` reject (``protocol.directional_jet`` passes it).
-    """
-    n = p.shape[0]
-    if offers_directions(surface):
-        out = surface.jet(p, 1, directions=R)
-        if not isinstance(out, tuple) or len(out) != 2:
-            raise ShapeError(f"{type(surface).__name__}.jet(p, 1, directions=R) must return "
-                             f"(y, JR)")
-        y, JR = (np.asarray(a, dtype=np.float64) for a in out)
-        for a, shape, name in ((y, (n, 3), "y"), (JR, (n, 3, 2), "JR")):
-            if a.shape != shape:
-                raise ShapeError(f"{type(surface).__name__}.jet returned {name} of shape "
-                                 f"{a.shape}; expected {shape}")
-            if not np.all(np.isfinite(a)):
-                raise ShapeError(f"{type(surface).__name__}.jet returned non-finite {name}")
-        return y, JR
-    y, J = surface_jet(surface, p, 1)
-    return y, np.einsum("kia,kab->kib", J, R)
+    """``y`` (n, 3) and ``J R`` (n, 3, 2), by a 2-direction jet when the map offers one."""
+    return directional_jet(surface, p, 1, R)
 
 
 def _surface_geometry(surface, p, chunk=CHUNK, tol=DEGENERATE_TOL):
