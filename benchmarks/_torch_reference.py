@@ -7,26 +7,35 @@ The same residual softplus network, built from the *same* parameters as an sns_n
   chunked;
 * one training step of the reference loss (position MSE + 1e-4 normal error): tangents along
   e_u, e_v by forward-mode AD or by create_graph Jacobians, then one backward pass.
+
+``bench_engine.py`` runs this file as a separate process (``python _torch_reference.py
+inputs.npz``), never importing torch itself: torch loads its own OpenMP runtime with an active
+wait policy, and in the same process that runtime's spinning threads slow the Numba passes of
+sns_np threefold (measured: full jet 0.95 s alone, 3.0 s after ``import torch``). Each library
+is timed in its own process, with its own defaults, in the same run.
 """
 
 from __future__ import annotations
 
+import json
+import sys
 import time
 
 import numpy as np
 
-try:
+# imported by main() only: bench_engine.py imports this module for write_inputs() and must not
+# load torch into its own process
+torch = hessian = jacfwd = jacrev = vmap = None
+
+
+def _import_torch():
+    global torch, hessian, jacfwd, jacrev, vmap
     import torch
     from torch.func import hessian, jacfwd, jacrev, vmap
-except ImportError:  # pragma: no cover - torch absent: the benchmark skips its column
-    torch = None
-
-
-def available() -> bool:
-    return torch is not None
 
 
 def torch_params(net, dtype):
+    """Torch tensors of the parameters; ``net`` has attributes W0, W1 (list), W2 (list), W3."""
     tdt = {np.dtype(np.float32): torch.float32, np.dtype(np.float64): torch.float64}[dtype]
 
     def t(a):
@@ -135,3 +144,40 @@ def training_step_times(net, p_np, R_np, q_np, n_np, dtype, weight=1e-4, repeats
                      ("create_graph Jacobian + backward", create_graph)]:
         out[name] = _best(fn, repeats)
     return out
+
+
+class _Params:
+    def __init__(self, data):
+        depth = int(data["depth"])
+        self.W0, self.W3 = data["W0"], data["W3"]
+        self.W1 = [data[f"W1_{i}"] for i in range(depth)]
+        self.W2 = [data[f"W2_{i}"] for i in range(depth)]
+
+
+def write_inputs(path, net, x, p, R, q, nt, repeats, chunks):
+    """Everything the torch process needs, in one .npz (called by bench_engine.py)."""
+    arrays = {"W0": net.W0, "W3": net.W3, "depth": net.depth, "x": x, "p": p, "R": R, "q": q,
+              "nt": nt, "dtype": np.dtype(net.dtype).name, "repeats": repeats,
+              "chunks": np.asarray(chunks)}
+    for i in range(net.depth):
+        arrays[f"W1_{i}"] = net.W1[i]
+        arrays[f"W2_{i}"] = net.W2[i]
+    np.savez(path, **arrays)
+
+
+def main(path):
+    _import_torch()
+    with np.load(path) as data:
+        net = _Params(data)
+        dt = np.dtype(str(data["dtype"]))
+        repeats = int(data["repeats"])
+        hess = full_hessian_times(net, data["x"], dt, repeats=max(1, repeats - 1),
+                                  chunks=tuple(int(c) for c in data["chunks"]))
+        train = training_step_times(net, data["p"], data["R"], data["q"], data["nt"], dt,
+                                    repeats=repeats)
+    print(json.dumps({"hessian": hess, "training": train, "threads": torch.get_num_threads(),
+                      "version": torch.__version__}))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
