@@ -13,6 +13,17 @@ from pathlib import Path
 from ._version import __version__
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with ``--version`` on every (sub)command and one-line errors (status 2)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.add_argument("--version", action="version", version=f"sns-np {__version__}")
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def _positive_int(text):
     try:
         v = int(text)
@@ -58,12 +69,11 @@ def _fit_kwargs(args):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="sns-np",
         description="Spherical Neural Surfaces: fit genus-0 meshes with a hand-differentiated "
         "network and compute their differential geometry without meshing.",
     )
-    parser.add_argument("--version", action="version", version=f"sns-np {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("demo", help="fit the built-in ellipsoid mesh and report its geometry",
