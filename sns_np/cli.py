@@ -148,8 +148,14 @@ def _check_output(path, suffixes):
     return path
 
 
+def _check_level(level, hi=8):
+    if not 0 <= level <= hi:
+        raise ValueError(f"--level must be between 0 and {hi}, got {level}")
+
+
 def _cmd_demo(args):
     from .demo import run_demo
+    _check_level(args.level)
     if args.output:
         _check_output(args.output, (".npz",))
     run_demo(level=args.level, out=args.output, progress=not args.quiet, **_fit_kwargs(args))
@@ -172,7 +178,9 @@ def _cmd_fit(args):
     from .mesh import load
     from .surface import fit_mesh
     out = _check_output(args.output, (".npz",))
-    ckpt = Path(args.checkpoint) if args.checkpoint else out.with_suffix(".ckpt.npz")
+    # checked now, not at the first checkpoint write many steps into the fit
+    ckpt = (_check_output(args.checkpoint, (".npz",)) if args.checkpoint
+            else out.with_suffix(".ckpt.npz"))
     if args.resume and not ckpt.exists():
         raise ValueError(f"--resume: no checkpoint at {ckpt}")
     V, F = load(args.mesh)
@@ -188,8 +196,7 @@ def _cmd_fit(args):
 def _cmd_eval(args):
     from .mesh import write_mesh
     out = _check_output(args.output, (".ply", ".vtu", ".obj"))
-    if not 0 <= args.level <= 8:
-        raise ValueError(f"--level must be between 0 and 8, got {args.level}")
+    _check_level(args.level)
     S = _load_model(args.model)
     fields = out.suffix.lower() != ".obj"
     V, F, data = S.to_mesh(args.level, fields=fields)
@@ -226,6 +233,7 @@ def _cmd_eigen(args):
     from .mesh import write_mesh
     from .spectral import eigenmodes, eigenmodes_on_mesh
     out = _check_output(args.output, (".ply", ".vtu")) if args.output else None
+    _check_level(args.level)   # before the eigenmodes, not after
     S = _load_model(args.model)
     res = eigenmodes(S, args.k, method=args.method, rng=args.seed)
     for i, lam in enumerate(res.eigenvalues, start=1):

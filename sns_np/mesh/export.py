@@ -75,7 +75,9 @@ def write_mesh(path, V, F, point_data=None, binary=True):
     directory = path.parent if str(path.parent) else Path(".")
     if not directory.is_dir():
         raise OSError(f"directory {str(directory)!r} does not exist")
-    mesh = meshio.Mesh(V, [("triangle", F.astype(np.int64))], point_data=data)
+    # meshio warns on stderr when it casts int64 faces down for PLY; PLY takes int32 anyway
+    cells = F.astype(np.int32 if ext == ".ply" and len(V) < 2**31 else np.int64)
+    mesh = meshio.Mesh(V, [("triangle", cells)], point_data=data)
     fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp" + ext, dir=directory)
     os.close(fd)
     try:
