@@ -129,6 +129,50 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--level", type=int, default=5, help="icosphere level of the output mesh")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=_cmd_eigen)
+
+    p = sub.add_parser("heat", help="heat flow of a scalar field on a model",
+                       description="Evolve a scalar field on a fitted surface by the heat "
+                       "equation f_t = Delta f and write PLY snapshots (field 'f' per vertex) "
+                       "into a new output folder, written atomically.")
+    p.add_argument("model", help="fitted model (.npz)")
+    p.add_argument("--field", required=True,
+                   help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
+                        "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
+    p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
+    p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
+    p.add_argument("--method", choices=["network", "spectral"], default="network")
+    p.add_argument("--snapshots", type=_positive_int, default=10,
+                   help="number of snapshots after t = 0 (10)")
+    p.add_argument("--points", type=_positive_int,
+                   help="sample points of the network scheme (default: at the stability limit)")
+    p.add_argument("--refit-steps", type=int, help="refit steps per time step (100)")
+    p.add_argument("-k", type=_positive_int, help="eigenmodes of the spectral scheme (50)")
+    p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
+    p.add_argument("--force", action="store_true", help="ignore the stability limit")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", required=True, help="output folder (must not exist)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_heat)
+
+    p = sub.add_parser("mcf", help="mean curvature flow of a model",
+                       description="Evolve a fitted surface by mean curvature flow "
+                       "X_t = -2 H n and write PLY snapshots (normal, H, K per vertex) and the "
+                       "snapshot models into a new output folder, written atomically.")
+    p.add_argument("model", help="fitted model (.npz)")
+    p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
+    p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
+    p.add_argument("--snapshots", type=_positive_int, default=10,
+                   help="number of snapshots after t = 0 (10)")
+    p.add_argument("--points", type=_positive_int,
+                   help="sample points per step (default: at the stability limit)")
+    p.add_argument("--refit-steps", type=int, help="refit steps per time step (100)")
+    p.add_argument("--lr", type=_positive_float, help="refit learning rate (1e-4)")
+    p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
+    p.add_argument("--force", action="store_true", help="ignore the stability limit")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", required=True, help="output folder (must not exist)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_mcf)
     return parser
 
 
@@ -242,6 +286,93 @@ def _cmd_eigen(args):
         V, F, data = eigenmodes_on_mesh(res, S, args.level)
         write_mesh(out, V, F, data)
         print(f"wrote {out}: {len(V)} vertices, fields {', '.join(data)}")
+    return 0
+
+
+def _check_output_folder(path, level):
+    path = Path(path)
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise ValueError(f"parent folder {str(parent)!r} of the output does not exist")
+    if path.exists() and (not path.is_dir() or any(path.iterdir())):
+        raise ValueError(f"output {str(path)!r} already exists; remove it or choose another")
+    if not 0 <= level <= 8:
+        raise ValueError(f"--level must be between 0 and 8, got {level}")
+    return path
+
+
+def _parse_field(spec, surface):
+    from .fields import NeuralField
+    from .shapes import ComponentField, SphericalHarmonic
+    spec = spec.strip()
+    if spec in ("x", "y", "z"):
+        return ComponentField(surface, "xyz".index(spec))
+    if spec.startswith("sh:"):
+        try:
+            l, m = (int(v) for v in spec[3:].split(","))
+        except ValueError:
+            raise ValueError(f"--field {spec!r}: expected 'sh:L,M' with integers, e.g. "
+                             f"sh:2,1") from None
+        return SphericalHarmonic(l, m)
+    if spec.endswith(".npz"):
+        return NeuralField.load(spec)
+    raise ValueError(f"--field {spec!r}: expected 'sh:L,M', 'x', 'y', 'z' or a NeuralField "
+                     f".npz")
+
+
+def _run_flow(run, save, out, label):
+    """Run a flow; on divergence keep the snapshots up to the last good one, then fail."""
+    from .errors import DivergenceError
+    try:
+        res = run()
+    except DivergenceError as exc:
+        partial = getattr(exc, "result", None)
+        if partial is not None and len(partial):
+            save(partial)
+            raise DivergenceError(f"{exc} (wrote {len(partial)} snapshots up to t = "
+                                  f"{partial.times[-1]:.6g} to {out})") from None
+        raise
+    save(res)
+    print(f"{label}: {len(res)} snapshots t = 0 .. {res.times[-1]:.6g} in {res.steps} steps, "
+          f"{res.seconds:.1f} s; wrote {out}")
+    return res
+
+
+def _cmd_heat(args):
+    from .flows import heat_flow
+    out = _check_output_folder(args.output, args.level)
+    S = _load_model(args.model)
+    field = _parse_field(args.field, S)
+    dt = args.dt or args.t_end / 100
+    opts = {}
+    if args.method == "network":
+        if args.points:
+            opts["n_points"] = args.points
+        if args.refit_steps is not None:
+            opts["refit_steps"] = args.refit_steps
+    elif args.k:
+        opts["k"] = args.k
+    _run_flow(lambda: heat_flow(S, field, args.t_end, dt, method=args.method,
+                                n_snapshots=args.snapshots,
+                                stability="ignore" if args.force else "raise", rng=args.seed,
+                                progress=not args.quiet, **opts),
+              lambda res: res.save(out, S, level=args.level), out, f"heat ({args.method})")
+    return 0
+
+
+def _cmd_mcf(args):
+    from .flows import mean_curvature_flow
+    out = _check_output_folder(args.output, args.level)
+    S = _load_model(args.model)
+    dt = args.dt or args.t_end / 100
+    opts = {k: v for k, v in (("n_points", args.points), ("refit_steps", args.refit_steps),
+                              ("lr", args.lr)) if v is not None}
+    res = _run_flow(lambda: mean_curvature_flow(
+        S, args.t_end, dt, n_snapshots=args.snapshots,
+        stability="ignore" if args.force else "raise", rng=args.seed,
+        progress=not args.quiet, **opts), lambda res: res.save(out, level=args.level), out,
+        "mcf")
+    print("areas: " + ", ".join(f"{a:.6g}" for a in res.areas))
     return 0
 
 

@@ -1,0 +1,158 @@
+"""Shared pieces of the flows (private): time grids, sample points, the stability limit,
+least-squares read-outs and atomic output folders."""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .._validation import check_choice, check_positive_float
+from ..sampling import fibonacci_sphere
+
+STABILITY_MODES = ("warn", "raise", "ignore")
+
+
+class StabilityWarning(RuntimeWarning):
+    """A time step exceeds the stability limit of an explicit scheme."""
+
+
+def check_times(t_end, dt, times=None, n_snapshots=10):
+    """Validated ``t_end``, ``dt`` and the ascending snapshot times (start 0, end ``t_end``)."""
+    t_end = check_positive_float(t_end, "t_end")
+    dt = check_positive_float(dt, "dt")
+    if times is None:
+        n = int(n_snapshots)
+        if n < 1:
+            raise ValueError(f"n_snapshots must be an integer >= 1, got {n_snapshots!r}")
+        return t_end, dt, np.linspace(0.0, t_end, n + 1)
+    T = np.asarray(times, dtype=np.float64).ravel()
+    if T.size == 0 or not np.all(np.isfinite(T)):
+        raise ValueError(f"times must be finite numbers, got {times!r}")
+    if T.min() < 0 or T.max() > t_end * (1 + 1e-12):
+        raise ValueError(f"times must lie in [0, t_end = {t_end:g}], got [{T.min():g}, "
+                         f"{T.max():g}]")
+    T = np.unique(np.concatenate([[0.0], T, [t_end]]))
+    return t_end, dt, T
+
+
+def substeps(t0, t1, dt):
+    """Equal steps of at most ``dt`` from ``t0`` to ``t1`` (so snapshots land exactly)."""
+    m = max(1, math.ceil((t1 - t0) / dt - 1e-9))
+    return [(t1 - t0) / m] * m
+
+
+def random_rotation(rng):
+    """A uniformly random rotation matrix (3, 3) (QR of a Gaussian matrix, sign-fixed)."""
+    Q, R = np.linalg.qr(rng.standard_normal((3, 3)))
+    Q = Q * np.sign(np.diag(R))
+    if np.linalg.det(Q) < 0:
+        Q[:, 0] = -Q[:, 0]
+    return Q
+
+
+def step_points(n, rng):
+    """``n`` near-uniform sphere points: a Fibonacci lattice under a fresh random rotation.
+
+    Every step sees a different point set, so a refitted network cannot settle on one lattice.
+    """
+    return fibonacci_sphere(n) @ random_rotation(rng).T
+
+
+def stability_limit(area, n_points):
+    """Largest stable explicit time step ``dt_max = h^2 / (2 pi)``, ``h^2 = A / N``.
+
+    Forward Euler ``f + dt Delta f`` multiplies an eigenmode of eigenvalue ``lambda`` by
+    ``1 - dt lambda``, stable for ``dt <= 2 / lambda``. ``N`` sample values carry at most about
+    ``N`` modes, and by Weyl's law the ``N``-th eigenvalue of a surface of area ``A`` is
+    ``lambda_N ~ 4 pi N / A``. Hence ``dt <= 2 / lambda_N = A / (2 pi N) = h^2 / (2 pi)`` with
+    ``h = sqrt(A / N)`` the mean sample spacing (docs/flows.md).
+    """
+    return float(area) / (2.0 * math.pi * int(n_points))
+
+
+def check_stability(dt, area, n_points, mode, what, during=""):
+    """Warn (``mode="warn"``), refuse (``"raise"``) or pass (``"ignore"``) when ``dt`` exceeds
+    :func:`stability_limit`; returns the limit."""
+    check_choice(mode, "stability", STABILITY_MODES)
+    limit = stability_limit(area, n_points)
+    if dt > limit and mode != "ignore":
+        msg = (f"{what}: time step dt = {dt:.4g} exceeds the explicit stability limit "
+               f"dt <= h^2 / (2 pi) = A / (2 pi N) = {limit:.4g}{during} (area A = {area:.4g}, "
+               f"N = {n_points} sample points, spacing h = {math.sqrt(area / n_points):.3g}); "
+               f"modes with eigenvalue above 2 / dt = {2 / dt:.4g} can grow. Use a smaller dt "
+               f"or fewer points")
+        if mode == "raise":
+            raise ValueError(msg)
+        warnings.warn(msg, StabilityWarning, stacklevel=3)
+    return limit
+
+
+def default_points(area, dt, lo=64, hi=10242):
+    """Sample count meeting the stability limit, clipped to ``[lo, hi]`` (10,242: the paper's)."""
+    return int(min(hi, max(lo, math.floor(area / (2.0 * math.pi * dt)))))
+
+
+def lstsq_readout(features, residual, rel_reg=1e-10):
+    """``delta`` (width, k) minimising ``|features delta - residual|^2`` (+ a tiny ridge)."""
+    H = np.asarray(features, dtype=np.float64)
+    G = H.T @ H
+    G[np.diag_indices_from(G)] += rel_reg * max(np.trace(G) / G.shape[0], 1e-300)
+    return np.linalg.solve(G, H.T @ np.asarray(residual, dtype=np.float64))
+
+
+def surface_readout(net, p, q):
+    """Set the read-out layer of a surface network to the least-squares fit of ``q`` at ``p``.
+
+    The network is linear in ``W3`` (and ``b3``): ``y = h W3^T + b3``. One exact solve is a
+    Gauss-Newton step in the last layer; a uniform scaling of the output (a shrinking sphere)
+    is captured exactly.
+    """
+    H = net.features(p).astype(np.float64)
+    if net.bias:
+        H = np.hstack([H, np.ones((H.shape[0], 1))])
+    y = H[:, :net.width] @ net.W3.T.astype(np.float64)
+    if net.bias:
+        y = y + net.b3
+    d = lstsq_readout(H, q - y)
+    net.W3[...] += d[:net.width].T
+    if net.bias:
+        net.b3[...] += d[net.width]
+
+
+def atomic_folder(out, write, overwrite=False):
+    """Write a folder through a temporary sibling and rename it into place.
+
+    ``write(tmp_path)`` fills the folder; on any error the temporary folder is removed, so
+    ``out`` is either absent, untouched or complete. An existing non-empty ``out`` is refused
+    unless ``overwrite``.
+    """
+    out = Path(out)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir():
+        raise OSError(f"parent folder {str(parent)!r} of the output does not exist")
+    if out.exists() and not out.is_dir():
+        raise OSError(f"output {str(out)!r} exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()) and not overwrite:
+        raise OSError(f"output folder {str(out)!r} exists and is not empty; remove it or "
+                      f"choose another")
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
+    try:
+        write(tmp)
+        old = None
+        if out.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
+            os.rmdir(old)
+            os.rename(out, old)
+        os.rename(tmp, out)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out

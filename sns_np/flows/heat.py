@@ -1,0 +1,405 @@
+"""Heat flow ``f_t = Delta_S f`` of a scalar field on a surface map (paper Sec. 6).
+
+Two schemes, both returning a :class:`HeatFlowResult` (``times`` ascending from 0 and the
+matching ``fields``, each a field on the parameter sphere, ``h(S(p)) = g(p)``):
+
+``method="network"`` (the paper's)
+    The field is a small :class:`~sns_np.fields.NeuralField`. Every step evaluates
+    ``f + dt Delta_S f`` at fixed sample points (``Delta_S`` by the divergence of the gradient,
+    paper Eq. 13, with the surface's chart jets computed once) and refits the network from its
+    previous weights: ``refit_steps`` Adam steps on the area-weighted squared error, then an
+    exact least-squares solve of the read-out layer (in which the field is linear).
+``method="spectral"``
+    ``f(t) = sum_i exp(-lambda_i t) <f, phi_i> phi_i`` through the Laplace-Beltrami
+    eigenmodes (:func:`sns_np.spectral.eigenmodes`, Rayleigh-Ritz by default) and the constant
+    mode; exact in time (``dt`` is validated but not needed).
+
+The explicit scheme is stable for ``dt <= h^2 / (2 pi)`` with ``h = sqrt(A / N)`` the mean
+spacing of the ``N`` sample points (docs/flows.md derives it); beyond it the flow warns or
+refuses (``stability=``). A refit that produces non-finite values, or a field whose range grows
+(the heat equation obeys a maximum principle), stops the flow with
+:class:`~sns_np.errors.DivergenceError`; the partial result, whose last snapshot is the last
+good field, is attached as ``exc.result``.
+
+References
+----------
+T. Williamson and N. J. Mitra, "Neural Geometry Processing via Spherical Neural Surfaces",
+Eurographics 2025, Sec. 6 (heat flow).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._progress import Progress
+from .._validation import as_generator, as_points, check_choice, check_positive_float
+from .._validation import check_positive_int as _pos_int
+from ..errors import DivergenceError
+from ..fields import NeuralField
+from ..geometry import (
+    laplace_beltrami_divgrad_from_jets,
+    sphere_field_chart_jets,
+    tangent_frame,
+)
+from ..geometry._common import chart_jets, degenerate_mask, raise_degenerate
+from ..nn.optim import Adam
+from ..protocol import chunk_slices, field_jet
+from ..sampling import fibonacci_sphere, surface_sample
+from ._common import check_stability, check_times, default_points, lstsq_readout, substeps
+
+__all__ = ["heat_flow", "HeatFlowResult", "ModalField", "HEAT_DEFAULTS"]
+
+METHODS = ("network", "spectral")
+
+#: options of the network scheme (docs/flows.md measures them)
+HEAT_DEFAULTS = dict(
+    width=10, depth=2, n_points=None, refit_steps=100, lr=1e-3, init_steps=2000,
+    growth=2.0, k=50, n_quad=20000,
+)
+
+
+@dataclass
+class HeatFlowResult:
+    """Snapshots of a heat flow.
+
+    Attributes
+    ----------
+    times : (m,) float array, ascending, ``times[0] == 0``
+    fields : list of m fields on the sphere (``jet(p, order)``); ``fields[j]`` is ``f(times[j])``
+    method : {"network", "spectral"}
+    stability_limit : float, ``h^2 / (2 pi)`` of the network scheme (NaN for "spectral")
+    steps : int, explicit steps taken (0 for "spectral")
+    seconds : float
+    stopped : str, "t_end" or the divergence message
+    info : dict, scheme details (sample size, initial fit error, projection residual, ...)
+    """
+
+    times: np.ndarray
+    fields: list
+    method: str
+    stability_limit: float = math.nan
+    steps: int = 0
+    seconds: float = 0.0
+    stopped: str = "t_end"
+    info: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return len(self.times)
+
+    def evaluate(self, p) -> np.ndarray:
+        """All snapshots at sphere points ``p`` (n, 3), as an (n, m) array."""
+        p = as_points(p, "p")
+        return np.stack([field_jet(f, p, 0) for f in self.fields], axis=1)
+
+    def save(self, folder, surface, level: int = 5, overwrite: bool = False):
+        """Write ``heat_000.ply`` ... (the surface mesh with the field ``f`` per vertex),
+        ``heat_000.npz`` for neural fields, and ``flow.json`` (times, method, stop reason),
+        into ``folder`` atomically. Returns the folder's Path."""
+        from ..mesh import icosphere, write_mesh
+        from ..protocol import surface_jet
+        from ._common import atomic_folder
+        P, F = icosphere(_pos_int(level, "level", minimum=0))
+        V = surface_jet(surface, P, 0)
+        vals = self.evaluate(P)
+
+        def write(tmp):
+            for j in range(len(self)):
+                write_mesh(tmp / f"heat_{j:03d}.ply", V, F, {"f": vals[:, j]})
+                if isinstance(self.fields[j], NeuralField):
+                    self.fields[j].save(tmp / f"heat_{j:03d}.npz")
+            (tmp / "flow.json").write_text(json.dumps(self.summary_dict(), indent=1))
+        return atomic_folder(folder, write, overwrite)
+
+    def summary_dict(self) -> dict:
+        return {"flow": "heat", "method": self.method, "times": [float(t) for t in self.times],
+                "steps": self.steps, "seconds": self.seconds, "stopped": self.stopped,
+                "stability_limit": self.stability_limit,
+                "info": {k: v for k, v in self.info.items() if _jsonable(v)}}
+
+
+def _jsonable(v):
+    return isinstance(v, (int, float, str, bool, type(None)))
+
+
+class ModalField:
+    """``g = c_0 phi_0 + sum_i c_i phi_i``: a combination of eigenfunctions, as a field.
+
+    Parameters
+    ----------
+    constant : float, the value of ``c_0 phi_0`` (a constant)
+    fields : list of k fields (``jet(p, order)``)
+    coefficients : (k,) float array
+
+    Examples
+    --------
+    >>> from sns_np.shapes import SphericalHarmonic
+    >>> g = ModalField(1.0, [SphericalHarmonic(1, 0)], [2.0])
+    >>> float(g(np.array([[0.0, 0.0, 1.0]]))[0]) == 1.0 + 2.0 * float(np.sqrt(3 / (4 * np.pi)))
+    True
+    """
+
+    def __init__(self, constant, fields, coefficients):
+        self.constant = float(constant)
+        self.fields = list(fields)
+        self.coefficients = np.asarray(coefficients, dtype=np.float64).ravel()
+        if self.coefficients.shape != (len(self.fields),):
+            raise ValueError(f"need one coefficient per field: {len(self.fields)} fields, "
+                             f"{self.coefficients.shape[0]} coefficients")
+
+    def jet(self, x, order: int = 0):
+        x = as_points(x, "x")
+        n = x.shape[0]
+        out = [np.full(n, self.constant), np.zeros((n, 3)), np.zeros((n, 3, 3))][:order + 1]
+        for f, c in zip(self.fields, self.coefficients):
+            if c == 0.0:
+                continue
+            parts = field_jet(f, x, order)
+            parts = (parts,) if order == 0 else parts
+            for a, b in zip(out, parts):
+                a += c * b
+        return out[0] if order == 0 else tuple(out)
+
+    def __call__(self, x):
+        return self.jet(x, 0)
+
+    value = __call__
+
+
+# ------------------------------------------------------------------------------ public API
+
+def heat_flow(surface, field, t_end, dt, method: str = "network", *, times=None,
+              n_snapshots: int = 10, stability: str = "warn", rng=None,
+              progress: bool = False, **options) -> HeatFlowResult:
+    """Evolve a scalar field by the heat equation ``f_t = Delta_S f`` on a surface map.
+
+    Parameters
+    ----------
+    surface : surface map (a SphericalNeuralSurface or any analytic shape); fixed
+    field : field on the sphere (``jet(p, order)``): a NeuralField, SphericalHarmonic, ...
+    t_end : float > 0
+    dt : float > 0, the explicit time step ("network"; "spectral" is exact in time)
+    method : {"network", "spectral"}
+    times : sequence of floats in [0, t_end], optional, snapshot times (0 and ``t_end`` are
+        always included); default ``n_snapshots + 1`` equally spaced times
+    stability : {"warn", "raise", "ignore"}, what to do when ``dt`` exceeds the explicit
+        limit ``h^2 / (2 pi)`` ("network" only)
+    rng : None, int or Generator (seeds the network initialisation; ``None`` means 0)
+    progress : bool, a progress line on stderr
+    **options
+        "network": ``width``, ``depth`` (field network, 10 and 2 as the paper; ignored when
+        ``field`` is already a NeuralField, which is copied), ``n_points`` (fixed sample
+        points; default ``A / (2 pi dt)`` clipped to [64, 10242], i.e. at the stability
+        limit), ``refit_steps`` (Adam steps per time step, 100), ``lr`` (1e-3),
+        ``init_steps`` (steps of the initial fit of a non-neural field, 2000), ``growth``
+        (divergence when ``max |f - mean|`` exceeds ``growth`` times its initial value, 2).
+        "spectral": ``k`` (non-constant modes, 50), ``n_quad`` (quadrature nodes for the
+        projection, 20,000) and any option of :func:`sns_np.spectral.eigenmodes` via
+        ``eigen_options`` (a dict).
+
+    Returns
+    -------
+    HeatFlowResult
+
+    Raises
+    ------
+    ValueError
+        Bad options, or ``dt`` beyond the stability limit with ``stability="raise"``.
+    DivergenceError
+        A refit diverged; ``exc.result`` holds the snapshots up to the last good field.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere, SphericalHarmonic
+    >>> res = heat_flow(Sphere(), SphericalHarmonic(2, 0), 0.1, 0.01, method="spectral", k=8)
+    >>> p = np.array([[0.0, 0.0, 1.0]])
+    >>> bool(np.isclose(res.fields[-1](p)[0], np.exp(-0.6) * SphericalHarmonic(2, 0)(p)[0]))
+    True
+    """
+    check_choice(method, "method", METHODS)
+    t_end, dt, T = check_times(t_end, dt, times, n_snapshots)
+    if not callable(getattr(field, "jet", None)):
+        raise TypeError(f"field must follow the field protocol (jet(p, order)); got "
+                        f"{type(field).__name__}")
+    allowed = set(HEAT_DEFAULTS) | {"eigen_options"}
+    unknown = set(options) - allowed
+    if unknown:
+        raise ValueError(f"unknown option(s) {sorted(unknown)}; expected some of "
+                         f"{sorted(allowed)}")
+    o = {**HEAT_DEFAULTS, **options}
+    if method == "spectral":
+        return _spectral(surface, field, T, o)
+    check_choice(stability, "stability", ("warn", "raise", "ignore"))
+    return _network(surface, field, T, dt, o, stability, as_generator(rng), progress)
+
+
+# ------------------------------------------------------------------------------ spectral
+
+def _spectral(surface, field, T, o):
+    from ..spectral import HarmonicField, eigenmodes
+    t0 = time.perf_counter()
+    k = _pos_int(o["k"], "k")
+    res = eigenmodes(surface, k, method="ritz", **dict(o.get("eigen_options") or {}))
+    quad = surface_sample(surface, _pos_int(o["n_quad"], "n_quad"), "quadrature")
+    f = quad.values(field)
+    Phi = res.evaluate(quad.p)
+    c = Phi.T @ (quad.weights * f)
+    mean = float(quad.weights @ f) / quad.area
+    proj = mean + Phi @ c
+    norm = math.sqrt(float(quad.weights @ (f * f)))
+    resid = math.sqrt(float(quad.weights @ ((f - proj) ** 2))) / max(norm, 1e-300)
+    if resid > 1e-2:
+        import warnings
+        warnings.warn(f"heat_flow(method='spectral'): the {k} modes represent the field only to "
+                      f"a relative L2 residual of {resid:.2e}; raise k", RuntimeWarning,
+                      stacklevel=3)
+    fields = []
+    harmonic = all(isinstance(phi, HarmonicField) for phi in res.eigenfunctions)
+    for t in T:
+        ct = c * np.exp(-res.eigenvalues * t)
+        if harmonic:  # one expansion: exact and fast jets
+            L = max(phi.L for phi in res.eigenfunctions)
+            C = np.zeros((L + 1) ** 2)
+            C[0] = mean * math.sqrt(4 * math.pi)  # Y_00 = 1 / sqrt(4 pi)
+            for phi, a in zip(res.eigenfunctions, ct):
+                C[:phi.coefficients.size] += a * phi.coefficients
+            fields.append(HarmonicField(C, name=f"heat t={t:g}"))
+        else:
+            fields.append(ModalField(mean, res.eigenfunctions, ct))
+    return HeatFlowResult(
+        times=T, fields=fields, method="spectral", seconds=time.perf_counter() - t0,
+        info={"k": k, "lambda_max": float(res.eigenvalues[-1]), "mean": mean,
+              "projection_residual": resid, "eigen_converged": bool(res.converged)})
+
+
+# ------------------------------------------------------------------------------ network
+
+class _Sample:
+    """Fixed sample points with the surface's chart jets (computed once) and area weights."""
+
+    def __init__(self, surface, n, tol=1e-8):
+        self.p = fibonacci_sphere(n)
+        self.R = tangent_frame(self.p)
+        self.JR = np.empty((n, 3, 2))
+        self.S2 = np.empty((n, 3, 2, 2))
+        for sl in chunk_slices(n, 16384):
+            _, JR, _, S2 = chart_jets(surface, self.p[sl], self.R[sl], 2)
+            bad = degenerate_mask(JR, tol)
+            if bad.any():
+                raise_degenerate(bad, self.p[sl], sl.start)
+            self.JR[sl], self.S2[sl] = JR, S2
+        d = np.linalg.norm(np.cross(self.JR[:, :, 0], self.JR[:, :, 1]), axis=1)
+        self.w = 4 * math.pi * d / n  # equal-area lattice: integral ~= sum w_i g_i
+        self.area = float(self.w.sum())
+
+    def laplacian(self, f):
+        v, g, Hs = field_jet(f, self.p, 2)
+        f_a, f_ab = sphere_field_chart_jets(g, Hs, self.R, self.p)
+        return v, laplace_beltrami_divgrad_from_jets(f_a, f_ab, self.JR, self.S2)
+
+
+def _refit(f, sample, target, steps, opt):
+    """Adam steps on ``sum w (g - target)^2 / sum w``, then the exact weighted read-out."""
+    net, p, w = f.net, sample.p, sample.w / sample.w.sum()
+    c = f.scale / net.out_dim
+    loss = math.nan
+    for _ in range(steps):
+        def loss_fn(y, JD, sl):
+            r = c * y.sum(axis=1) - target[sl]
+            dy = np.repeat((2.0 * c * w[sl] * r)[:, None], net.out_dim, axis=1)
+            return float(w[sl] @ (r * r)), dy, None
+        loss, grad = net.value_and_grad(p, loss_fn, order=0)
+        if not (np.isfinite(loss) and np.all(np.isfinite(grad))):
+            return math.inf
+        opt.step(net.theta, grad)
+    H = net.features(p)
+    if net.bias:
+        H = np.hstack([H, np.ones((H.shape[0], 1))])
+    r = target - f(p)
+    sw = np.sqrt(w)
+    d = lstsq_readout(H * sw[:, None], r * sw) / f.scale
+    if not np.all(np.isfinite(d)):
+        return math.inf
+    net.W3[...] += d[:net.width]
+    if net.bias:
+        net.b3[...] += d[net.width]
+    r = target - f(p)
+    return float(w @ (r * r))
+
+
+def _network(surface, field, T, dt, o, stability, rng, progress):
+    t_start = time.perf_counter()
+    refit_steps = _pos_int(o["refit_steps"], "refit_steps", minimum=0)
+    init_steps = _pos_int(o["init_steps"], "init_steps", minimum=0)
+    lr = check_positive_float(o["lr"], "lr")
+    growth = check_positive_float(o["growth"], "growth")
+    if growth <= 1.0:
+        raise ValueError(f"growth must be > 1, got {growth}")
+    area0 = surface_sample(surface, 4096, "quadrature").area
+    n = default_points(area0, dt) if o["n_points"] is None else _pos_int(o["n_points"],
+                                                                          "n_points", 16)
+    limit = check_stability(dt, area0, n, stability, "heat_flow(method='network')")
+    sample = _Sample(surface, n)
+
+    if isinstance(field, NeuralField):
+        f = field.copy()
+        init_rms = 0.0
+    else:
+        f = NeuralField(_pos_int(o["width"], "width"), _pos_int(o["depth"], "depth", 0),
+                        seed=rng)
+        target0 = field_jet(field, sample.p, 0)
+        opt0 = Adam(1e-2)
+        ms = _refit(f, sample, target0, init_steps, opt0)
+        init_rms = math.sqrt(ms) / max(math.sqrt(float(sample.w @ target0 ** 2) / sample.area),
+                                       1e-300)
+    opt = Adam(lr)
+    v0 = f(sample.p)
+    mean0 = float(sample.w @ v0) / sample.area
+    range0 = float(np.abs(v0 - mean0).max())
+    fields, times = [f.copy()], [0.0]
+    steps, t, stopped = 0, 0.0, "t_end"
+    total = sum(len(substeps(a, b, dt)) for a, b in zip(T[:-1], T[1:]))
+    bar = Progress(total, "heat", enabled=progress)
+    info = {"n_points": n, "area": sample.area, "initial_fit_rel_rms": init_rms,
+            "refit_steps": refit_steps, "width": f.net.width, "depth": f.net.depth}
+    last_ms = 0.0
+    try:
+        for a, b in zip(T[:-1], T[1:]):
+            for h in substeps(a, b, dt):
+                good = f.theta.copy()
+                v, lap = sample.laplacian(f)
+                target = v + h * lap
+                last_ms = _refit(f, sample, target, refit_steps, opt)
+                vals = f(sample.p)
+                bad = not (np.isfinite(last_ms) and np.all(np.isfinite(vals)))
+                spread = math.inf if bad else float(np.abs(vals - mean0).max())
+                if bad or spread > growth * range0 + 1e-12:
+                    f.theta[...] = good
+                    why = ("the refit produced non-finite values" if bad else
+                           f"max |f - mean| grew from {range0:.3g} to {spread:.3g} (the heat "
+                           f"equation never increases it)")
+                    raise DivergenceError(
+                        f"heat flow diverged at t = {t + h:.6g} (step {steps + 1}): {why}; the "
+                        f"last good field (t = {t:.6g}) is kept. Lower dt (stability limit "
+                        f"{limit:.3g}) or lr ({lr:g})")
+                steps += 1
+                t += h
+                bar.update(steps, t=f"{t:.4g}", fit=f"{math.sqrt(last_ms):.1e}")
+            fields.append(f.copy())
+            times.append(float(b))
+    except DivergenceError as exc:
+        bar.close()
+        if t > times[-1]:
+            fields.append(f.copy())
+            times.append(t)
+        exc.result = HeatFlowResult(np.array(times), fields, "network", limit, steps,
+                                    time.perf_counter() - t_start, str(exc), info)
+        raise
+    bar.close(steps)
+    info["last_refit_rms"] = math.sqrt(last_ms)
+    return HeatFlowResult(np.array(times), fields, "network", limit, steps,
+                          time.perf_counter() - t_start, stopped, info)

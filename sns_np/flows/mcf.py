@@ -1,0 +1,288 @@
+"""Mean curvature flow ``X_t = Delta_S X = -2 H n`` of a SphericalNeuralSurface (paper Sec. 6).
+
+Every step of length ``h`` (explicit Euler, the paper's scheme):
+
+1. draw ``N`` sphere points ``p_i`` (a Fibonacci lattice under a fresh random rotation) and
+   compute ``x_i = S(p_i)``, ``H_i``, ``n_i`` of the current surface
+   (:func:`sns_np.geometry.differential_quantities`);
+2. targets ``q_i = x_i - 2 h H_i n_i`` (``Delta_S x = -2 H n``, paper Eq. 17);
+3. refit the surface network from its current weights: an exact least-squares solve of the
+   read-out layer, ``refit_steps`` steps of :func:`sns_np.surface.fit_sampler` on the pairs
+   ``(p_i, q_i)``, and the read-out solve again.
+
+The read-out solve is a Gauss-Newton step in the last layer (the network is linear in it): it
+moves the surface by the best displacement the current features can express, so the refit
+does not lag behind the flow (a uniform shrink, the sphere's flow, is captured exactly).
+
+The explicit step is stable for ``dt <= h_s^2 / (2 pi) = A / (2 pi N)`` (the heat-equation
+limit of :mod:`sns_np.flows.heat`, with the current area ``A``); the flow checks it at the
+start (``stability=``) and warns once if the shrinking area makes a later step exceed it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._progress import Progress
+from .._validation import as_generator, check_choice, check_positive_float
+from .._validation import check_positive_int as _pos_int
+from ..errors import DegenerateMapError, DivergenceError
+from ..geometry import area_element, differential_quantities
+from ..surface import SphericalNeuralSurface, fit_sampler
+from ._common import (
+    StabilityWarning,
+    check_stability,
+    check_times,
+    default_points,
+    stability_limit,
+    step_points,
+    substeps,
+    surface_readout,
+)
+
+__all__ = ["mean_curvature_flow", "MeanCurvatureFlowResult", "MCF_DEFAULTS"]
+
+#: refit options (docs/flows.md measures them)
+MCF_DEFAULTS = dict(n_points=None, refit_steps=100, lr=1e-4, batch=None, normal_weight=0.0,
+                    dtype="float64", growth=1.5, n_eval=256)
+
+
+@dataclass
+class MeanCurvatureFlowResult:
+    """Snapshots of a mean curvature flow.
+
+    Attributes
+    ----------
+    times : (m,) float array, ascending, ``times[0] == 0``
+    surfaces : list of m SphericalNeuralSurface, ``surfaces[j]`` at ``times[j]``
+    areas : (m,) float array, surface areas (quadrature) of the snapshots
+    meshes : list of (V, F, data) per snapshot when ``mesh_level`` was given, else None
+    stability_limit : float, ``A / (2 pi N)`` at the start
+    steps : int
+    seconds : float
+    stopped : str, "t_end" or the divergence message
+    info : dict, per-step refit errors (``refit_rms``, input units), sample size, options
+    """
+
+    times: np.ndarray
+    surfaces: list
+    areas: np.ndarray
+    meshes: list | None = None
+    stability_limit: float = math.nan
+    steps: int = 0
+    seconds: float = 0.0
+    stopped: str = "t_end"
+    info: dict = field(default_factory=dict)
+
+    def __len__(self):
+        return len(self.times)
+
+    def save(self, folder, level: int = 5, models: bool = True, overwrite: bool = False):
+        """Write ``mcf_000.ply`` ... (meshes with normal, H, K per vertex), the models
+        ``mcf_000.npz`` ... (``models=True``) and ``flow.json``, into ``folder`` atomically."""
+        from ..mesh import write_mesh
+        from ._common import atomic_folder
+
+        def write(tmp):
+            for j, S in enumerate(self.surfaces):
+                V, F, data = S.to_mesh(level)
+                data = {k: data[k] for k in ("normal", "H", "K", "area_element")}
+                write_mesh(tmp / f"mcf_{j:03d}.ply", V, F, data)
+                if models:
+                    S.save(tmp / f"mcf_{j:03d}.npz")
+            (tmp / "flow.json").write_text(json.dumps(self.summary_dict(), indent=1))
+        return atomic_folder(folder, write, overwrite)
+
+    def summary_dict(self) -> dict:
+        return {"flow": "mean_curvature", "times": [float(t) for t in self.times],
+                "areas": [float(a) for a in self.areas], "steps": self.steps,
+                "seconds": self.seconds, "stopped": self.stopped,
+                "stability_limit": self.stability_limit,
+                "n_points": self.info.get("n_points")}
+
+
+class _StepTarget:
+    """The targets ``q = x - 2 h H n`` of one step, in the surface's normalised frame."""
+
+    def __init__(self, S, p, q, normals):
+        self.S, self.p = S, p
+        self.center, self.scale = S.center, S.scale
+        self.q = (q - S.center) / S.scale
+        self.normals = normals
+        self.bbox_diagonal = float(np.linalg.norm(q.max(axis=0) - q.min(axis=0)))
+        self.fingerprint = "mcf-step"
+        self.h = None
+
+    def sample(self, n, rng):
+        N = self.p.shape[0]
+        idx = rng.permutation(N) if n >= N else rng.choice(N, n, replace=False)
+        return self.p[idx], self.q[idx], self.normals[idx]
+
+    def evaluate_at(self, p):
+        dq = differential_quantities(self.S, p)
+        q = dq.x - 2.0 * self.h * dq.H[:, None] * dq.n
+        return (q - self.center) / self.scale, dq.n
+
+
+def _area(S, n_quad=4096):
+    from ..sampling import surface_sample
+    return surface_sample(S, n_quad, "quadrature").area
+
+
+def mean_curvature_flow(surface, t_end, dt, *, times=None, n_snapshots: int = 10,
+                        stability: str = "warn", mesh_level: int | None = None, rng=None,
+                        progress: bool = False, **options) -> MeanCurvatureFlowResult:
+    """Evolve a fitted surface by mean curvature flow ``X_t = Delta_S X = -2 H n``.
+
+    A sphere of radius ``r0`` follows ``r^2 = r0^2 - 4 t``; convex surfaces become round;
+    the area decreases (``dA/dt = -4 integral H^2 dA``).
+
+    Parameters
+    ----------
+    surface : SphericalNeuralSurface (not modified)
+    t_end : float > 0
+    dt : float > 0, the explicit time step
+    times : sequence of floats in [0, t_end], optional, snapshot times (0 and ``t_end`` always
+        included); default ``n_snapshots + 1`` equally spaced times
+    stability : {"warn", "raise", "ignore"}, when ``dt`` exceeds ``A / (2 pi N)`` at the start
+    mesh_level : int, optional, also keep ``S.to_mesh(mesh_level)`` of every snapshot
+    rng : None, int or Generator (sample points and refit batches; ``None`` means 0)
+    progress : bool, a progress line on stderr
+    **options
+        ``n_points`` (samples per step; default ``A / (4 pi dt)`` clipped to [64, 10242]: the
+        stability limit holds until the area has halved), ``refit_steps`` (100, the paper's
+        "up to 100 epochs"; 0 keeps only the read-out solve), ``lr`` (Adam, constant, 1e-4),
+        ``batch`` (default all points), ``normal_weight`` (0: the targets' normals are known
+        only to O(dt)), ``dtype`` ("float64"), ``growth`` (divergence when the area exceeds
+        ``growth`` times the initial area, 1.5), ``n_eval`` (held-out points per refit
+        report, 256).
+
+    Returns
+    -------
+    MeanCurvatureFlowResult
+
+    Raises
+    ------
+    ValueError
+        Bad options, or ``dt`` beyond the stability limit with ``stability="raise"``.
+    DivergenceError
+        A refit diverged (non-finite values, a degenerate map, a growing area);
+        ``exc.result`` holds the snapshots up to the last good surface.
+    """
+    if not isinstance(surface, SphericalNeuralSurface):
+        raise TypeError(f"surface must be a SphericalNeuralSurface (the flow refits its "
+                        f"network), got {type(surface).__name__}; fit one with "
+                        f"SphericalNeuralSurface.fit_shape")
+    t_end, dt, T = check_times(t_end, dt, times, n_snapshots)
+    check_choice(stability, "stability", ("warn", "raise", "ignore"))
+    unknown = set(options) - set(MCF_DEFAULTS)
+    if unknown:
+        raise ValueError(f"unknown option(s) {sorted(unknown)}; expected some of "
+                         f"{sorted(MCF_DEFAULTS)}")
+    o = {**MCF_DEFAULTS, **options}
+    refit_steps = _pos_int(o["refit_steps"], "refit_steps", minimum=0)
+    lr = check_positive_float(o["lr"], "lr")
+    growth = check_positive_float(o["growth"], "growth")
+    n_eval = _pos_int(o["n_eval"], "n_eval")
+    check_choice(o["dtype"], "dtype", ("float32", "float64"))
+    if mesh_level is not None:
+        mesh_level = _pos_int(mesh_level, "mesh_level", minimum=0)
+    rng = as_generator(rng)
+    t_start = time.perf_counter()
+
+    area0 = _area(surface)
+    # half the limit's count: the flow shrinks the area, and with it the limit
+    N = default_points(area0 / 2, dt) if o["n_points"] is None else _pos_int(o["n_points"],
+                                                                          "n_points", 16)
+    batch = N if o["batch"] is None else _pos_int(o["batch"], "batch")
+    limit0 = check_stability(dt, area0, N, stability, "mean_curvature_flow")
+    S = surface
+    surfaces, times, areas = [S], [0.0], [area0]
+    meshes = [S.to_mesh(mesh_level)] if mesh_level is not None else None
+    refit_rms, warned = [], stability == "ignore"
+    total = sum(len(substeps(a, b, dt)) for a, b in zip(T[:-1], T[1:]))
+    bar = Progress(total, "mcf", enabled=progress)
+    steps, t = 0, 0.0
+    info = {"n_points": N, "refit_steps": refit_steps, "lr": lr, "refit_rms": refit_rms}
+
+    def diverged(why, exc=None):
+        bar.close()
+        msg = (f"mean curvature flow diverged at t = {t + h:.6g} (step {steps + 1}): {why}; "
+               f"the last good surface (t = {t:.6g}) is kept. Lower dt (stability limit "
+               f"{limit0:.3g}) or lr ({lr:g})")
+        if t > times[-1]:
+            surfaces.append(S)
+            times.append(t)
+            areas.append(_area(S))
+        err = DivergenceError(msg)
+        err.result = MeanCurvatureFlowResult(
+            np.array(times), surfaces, np.array(areas), meshes, limit0, steps,
+            time.perf_counter() - t_start, msg, info)
+        return err
+
+    for a, b in zip(T[:-1], T[1:]):
+        for h in substeps(a, b, dt):
+            p = step_points(N, rng)
+            try:
+                dq = differential_quantities(S, p)
+            except DegenerateMapError as exc:
+                raise diverged(f"the surface map became degenerate ({exc})") from None
+            area_now = 4.0 * math.pi * float(dq.area_element.mean())
+            if not warned and dt > stability_limit(area_now, N):
+                warned = True
+                check_stability(dt, area_now, N, "warn", "mean_curvature_flow",
+                                during=f" at t = {t:.4g}, as the area shrank")
+            q = dq.x - 2.0 * h * dq.H[:, None] * dq.n
+            if not np.all(np.isfinite(q)):
+                raise diverged("non-finite curvature or positions")
+            target = _StepTarget(S, p, q, dq.n)
+            target.h = h
+            net = S.net.copy()
+            surface_readout(net, p, target.q)
+            if refit_steps:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", StabilityWarning)
+                        S_new, rep = fit_sampler(
+                            target, net=net, steps=refit_steps, batch=batch, lr=lr,
+                            schedule="constant", warmup=0, normal_weight=o["normal_weight"],
+                            dtype=o["dtype"], n_eval=n_eval, seed=rng, progress=False,
+                            metadata=dict(S.metadata))
+                except DivergenceError as exc:
+                    raise diverged(f"the refit diverged ({exc})") from None
+                net = S_new.net
+            if not np.all(np.isfinite(net.theta)):
+                raise diverged("the refit produced non-finite parameters")
+            surface_readout(net, p, target.q)
+            S_next = SphericalNeuralSurface(net, S.center, S.scale, metadata=dict(S.metadata))
+            r = S_next.jet(p, 0) - q
+            rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", r, r))))
+            if not np.isfinite(rms):
+                raise diverged("the refit produced non-finite positions")
+            try:
+                area_next = 4.0 * math.pi * float(area_element(S_next, p).mean())
+            except DegenerateMapError as exc:
+                raise diverged(f"the refitted map is degenerate ({exc})") from None
+            if not area_next <= growth * area0:
+                raise diverged(f"the area grew from {area0:.4g} to {area_next:.4g} (mean "
+                               f"curvature flow decreases it)")
+            refit_rms.append(rms)
+            S = S_next
+            steps += 1
+            t += h
+            bar.update(steps, t=f"{t:.4g}", area=f"{area_now:.4g}", fit=f"{rms:.1e}")
+        S.metadata["mcf_time"] = float(b)
+        surfaces.append(S)
+        times.append(float(b))
+        areas.append(_area(S))
+        if meshes is not None:
+            meshes.append(S.to_mesh(mesh_level))
+    bar.close(steps)
+    return MeanCurvatureFlowResult(np.array(times), surfaces, np.array(areas), meshes, limit0,
+                                   steps, time.perf_counter() - t_start, "t_end", info)
