@@ -1,0 +1,90 @@
+"""Small helpers shared by the example scripts (not part of the sns_np API).
+
+The scripts import this file as ``_common``; Python finds it because a script's own folder is
+first on ``sys.path`` when you run ``python examples/<script>.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+from contextlib import contextmanager
+from pathlib import Path
+
+#: SNS_NP_SMOKE=1 (set by examples/run_all.py and ``tox -e examples``): tiny budgets, seconds
+SMOKE = os.environ.get("SNS_NP_SMOKE", "0") not in ("", "0")
+SMOKE_FIT = {"width": 32, "depth": 2, "steps": 50, "batch": 512, "n_eval": 2000}
+
+DEFAULT_OUT_DIR = "sns_np_examples_out"
+
+#: the default input: an ellipsoid meshed from a level-4 icosphere (2,562 vertices), generated
+#: by the package itself, so the examples need no download
+BUILTIN = "builtin:ellipsoid(1, 1.3, 0.7):level4"
+
+
+def read_mesh(path=None):
+    """Return ``(V, F, name)`` for a mesh file, or for the built-in ellipsoid when path is None.
+
+    The mesh is read but not checked here: ``fit_mesh`` checks it (closed, manifold, genus 0,
+    outward) and raises an error naming the defect.
+    """
+    if path is None or path == BUILTIN:
+        from sns_np.shapes import Ellipsoid
+        V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
+        return V, F, "ellipsoid"
+    from sns_np.mesh import load
+    V, F = load(path)
+    return V, F, Path(path).stem
+
+
+def output_dir(path) -> Path:
+    """Check the output folder early; it is created when the first file is written."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"output folder {str(path)!r} exists and is not a folder")
+    return path
+
+
+def write_atomically(path, write):
+    """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it onto ``path``.
+
+    A failure (or Ctrl-C) half-way never leaves a truncated file under the final name.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp" + path.suffix,
+                               dir=path.parent)
+    os.close(fd)
+    try:
+        write(tmp)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def positive_int(text):
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
+
+
+@contextmanager
+def clear_errors(parser):
+    """Turn bad input (ValueError, OSError, missing optional package) into one line, status 2.
+
+    sns_np raises ValueError subclasses that name the problem (the file, the defect found).
+    """
+    try:
+        yield
+    except (ValueError, OSError, ImportError) as exc:
+        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        parser.exit(2, f"{parser.prog}: error: {message}\n")
