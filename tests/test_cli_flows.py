@@ -10,6 +10,8 @@ from sns_np.mesh import load
 from sns_np.shapes import Sphere
 from sns_np.surface import SphericalNeuralSurface
 
+pytestmark = pytest.mark.slow_nojit  # fits and flows run the network kernels
+
 
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):

@@ -118,6 +118,7 @@ def test_heat_spectral_harmonic_decay_exact(quad, l):
     np.testing.assert_allclose(res.fields[-1](p), 0.5 * Y.jet(p, 0), atol=1e-10)
 
 
+@pytest.mark.slow_nojit
 def test_heat_spectral_conserves_integral_on_ellipsoid():
     E = Ellipsoid(1.0, 1.3, 0.7)
     f = NeuralField(seed=3)
@@ -132,6 +133,7 @@ def test_heat_spectral_conserves_integral_on_ellipsoid():
 
 
 @pytest.mark.parametrize("l, n_points", [(1, None), (2, 400)])
+@pytest.mark.slow_nojit
 def test_heat_network_harmonic_decay(quad, l, n_points):
     """The paper's scheme: exp(-l(l+1) t) within 1% at half amplitude; the refits follow the
     explicit Euler product (1 - lambda dt)^n much more closely."""
@@ -150,6 +152,7 @@ def test_heat_network_harmonic_decay(quad, l, n_points):
     assert abs(a / (1 - lam * dt) ** 40 - 1) < 2e-3
 
 
+@pytest.mark.slow_nojit
 def test_heat_network_conserves_integral_within_mc_error():
     E = Ellipsoid(1.0, 1.3, 0.7)
     field = SphericalHarmonic(1, 0)
@@ -163,6 +166,7 @@ def test_heat_network_conserves_integral_within_mc_error():
     assert np.abs(f1 - f0).max() > 1e-2  # it did evolve
 
 
+@pytest.mark.slow_nojit
 def test_heat_stability_limit_named():
     with pytest.raises(ValueError, match=r"dt <= h\^2 / \(2 pi\) = A / \(2 pi N\) = 0.0039"):
         heat_flow(Sphere(), SphericalHarmonic(1, 0), 0.1, 0.01, n_points=512,
@@ -173,6 +177,7 @@ def test_heat_stability_limit_named():
     assert stability_limit(4 * np.pi, 512) == pytest.approx(2 / 512)
 
 
+@pytest.mark.slow_nojit
 def test_heat_divergence_keeps_last_good_field():
     Y = SphericalHarmonic(2, 0)
     with pytest.raises(DivergenceError, match="last good field") as info:
@@ -222,6 +227,7 @@ def test_heat_save_is_atomic(tmp_path, monkeypatch):
 
 # ------------------------------------------------------------------------------ MCF
 
+@pytest.mark.slow_nojit
 def test_mcf_sphere_follows_closed_form(sphere_sns):
     """r^2 = 1 - 4 t within 1% until r = 0.5 (t = 3/16)."""
     res = mean_curvature_flow(sphere_sns, 0.1875, 0.00125, n_snapshots=5, refit_steps=0,
@@ -237,6 +243,7 @@ def test_mcf_sphere_follows_closed_form(sphere_sns):
     assert sphere_sns.net.theta is not S.net.theta  # the input is not modified
 
 
+@pytest.mark.slow_nojit
 def test_mcf_ellipsoid_becomes_rounder():
     S, _ = SphericalNeuralSurface.fit_shape(Ellipsoid(1.0, 1.3, 0.7), width=32, steps=300,
                                             seed=1, dtype="float64", **SLOW_FIT)
@@ -265,6 +272,7 @@ def test_mcf_radial_shape_area_decreases():
     assert roughness(res.surfaces[-1]) < 0.95 * roughness(res.surfaces[0])  # bumps flatten
 
 
+@pytest.mark.slow_nojit
 def test_mcf_bad_input_and_divergence(sphere_sns):
     with pytest.raises(TypeError, match="SphericalNeuralSurface"):
         mean_curvature_flow(Sphere(), 0.1, 0.01)
@@ -315,6 +323,7 @@ def test_fit_sdf_smooth_union_with_finite_differences():
     assert rep.history[-1]["distance_mean"] < rep.history[0]["distance_mean"]
 
 
+@pytest.mark.slow_nojit
 def test_fit_sdf_from_a_fitted_surface(sphere_sns):
     sdf = lambda x: np.linalg.norm(x - [0.1, 0, 0], axis=1) - 1.2
     S, rep = SphericalNeuralSurface.fit_sdf(sdf, init=sphere_sns, iterations=2, steps=40,
