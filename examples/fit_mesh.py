@@ -11,7 +11,7 @@ Run (from the project root):
     python examples/fit_mesh.py ../shared/data/meshes/spot_triangulated.obj --steps 1000
     python examples/fit_mesh.py --help
 
-The default budget is the library's (a 256 x 8 network, 3000 steps): minutes on a laptop,
+The default budget is the library's (a 256 x 8 network, 800 steps): minutes on a laptop,
 longer on a small shared machine; --steps, --width and --depth trade accuracy for time.
 SNS_NP_SMOKE=1 uses a 32 x 2 network and 50 steps: seconds, and a rough surface.
 Output: OUT_DIR/<mesh name>.npz (OUT_DIR defaults to ./sns_np_examples_out).

@@ -46,7 +46,7 @@ def _positive_float(text):
 
 def _add_fit_options(p):
     g = p.add_argument_group("fitting options (defaults: docs/fitting.md)")
-    g.add_argument("--steps", type=_positive_int, help="step budget (default 3000)")
+    g.add_argument("--steps", type=_positive_int, help="step budget (default 800)")
     g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
                    help="stop after this many seconds")
     g.add_argument("--tol", type=_positive_float,
@@ -55,9 +55,9 @@ def _add_fit_options(p):
     g.add_argument("--width", type=_positive_int, help="network width (default 256)")
     g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
     g.add_argument("--batch", type=_positive_int, help="samples per step (default 2048)")
-    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 1e-3)")
+    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 1e-4)")
     g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
-    g.add_argument("--normal-weight", type=float, help="weight of the normal loss (1e-4)")
+    g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
     g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
     g.add_argument("--seed", type=int, help="random seed (default 0)")
 

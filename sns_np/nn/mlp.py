@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -672,6 +673,9 @@ class load_npz:
     def __enter__(self):
         if not self.path.is_file():
             raise ModelFileError(f"model file {str(self.path)!r} does not exist")
+        if not zipfile.is_zipfile(self.path):
+            # np.load would try other formats (and blame pickles for a text file): say plainly
+            raise ModelFileError(f"{self.path}: not a readable .npz model file (not a zip archive)")
         try:
             self._data = np.load(self.path, allow_pickle=False)
         except Exception as exc:  # zipfile.BadZipFile, OSError, ValueError, EOFError...
