@@ -16,7 +16,8 @@ pytestmark = pytest.mark.slow_nojit  # fits and flows run the network kernels
 @pytest.fixture(scope="module")
 def model(tmp_path_factory):
     S, _ = SphericalNeuralSurface.fit_shape(Sphere(), width=16, depth=1, steps=150, batch=512,
-                                            progress=False, n_eval=256, seed=0)
+                                            progress=False, n_eval=256, seed=0, lr=1e-3,
+                                            normal_weight=1e-4)
     path = tmp_path_factory.mktemp("model") / "sphere.npz"
     S.save(path)
     return path

@@ -133,7 +133,8 @@ def test_ritz_convergence_indicator_and_fixed_degree():
 def test_ritz_on_a_fitted_neural_surface_matches_fem_of_its_mesh():
     from sns_np.surface import fit_shape
 
-    S, _ = fit_shape(Ellipsoid(1.0, 1.3, 0.7), width=16, depth=1, steps=60, progress=False)
+    S, _ = fit_shape(Ellipsoid(1.0, 1.3, 0.7), width=16, depth=1, steps=60, progress=False,
+                     lr=1e-3, normal_weight=1e-4)
     res = eigenmodes(S, 4, method="ritz")
     extrapolated = richardson(fem_eigenvalues(S, 4, 4), fem_eigenvalues(S, 4, 5))
     assert np.all(np.abs(extrapolated / res.eigenvalues - 1) < 1e-3)

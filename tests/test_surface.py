@@ -11,7 +11,7 @@ from sns_np.testing import check_directional_jet, check_jet
 
 from .conftest import sphere_points
 
-TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False)
+TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False, normal_weight=1e-4)
 
 
 def make_surface(seed=0):
