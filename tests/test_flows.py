@@ -20,7 +20,8 @@ from sns_np.sampling import surface_sample
 from sns_np.shapes import Bobble, Ellipsoid, Sphere, SphericalHarmonic
 from sns_np.surface import SphericalNeuralSurface
 
-SLOW_FIT = dict(depth=2, batch=1024, progress=False, n_eval=512, lr=1e-3, normal_weight=1e-4)
+SLOW_FIT = dict(depth=2, batch=1024, progress=False, n_eval=512, lr=1e-3, normal_weight=1e-4,
+                input_scale=2.0)
 
 
 # ------------------------------------------------------------------------------ helpers

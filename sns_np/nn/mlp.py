@@ -37,6 +37,7 @@ from .._validation import (
     as_generator,
     check_finite,
     check_order,
+    check_positive_float,
     check_positive_int,
 )
 from ..errors import ModelFileError, ShapeError
@@ -84,14 +85,18 @@ class ResidualMLP:
     chunk_size : int, optional
         Points per chunk in ``jet``/``vjp`` (default: chosen from the number of streams so
         that activations stay cache-sized). Bounds memory on any input size.
+    input_scale : float
+        Scale of the first layer's initial weights (see Notes); only the initialisation uses it.
 
     Notes
     -----
     Initialisation (normal, zero mean; ``fan_in`` of the layer):
 
-    * ``W0``: std ``2 / sqrt(in_dim)``. On unit-sphere inputs the pre-activations then have
-      std about 1.15, so the softplus features are genuinely non-linear over the sphere
-      (PyTorch's default, std ``1 / sqrt(3 in_dim)``, leaves them nearly linear).
+    * ``W0``: std ``input_scale / sqrt(in_dim)``, ``input_scale`` = 2 by default. On
+      unit-sphere inputs the pre-activations then have std about 1.15, so the softplus
+      features are genuinely non-linear over the sphere (PyTorch's default, std
+      ``1 / sqrt(3 in_dim)``, leaves them nearly linear). Surface fitting uses 4 (features
+      that vary on a fraction of the sphere; measured in docs/fitting.md).
     * ``W1_k``: std ``sqrt(2 / width)`` (He), keeping the inner branch's scale.
     * ``W2_k``: std ``1 / sqrt(width * depth)``, so the residual branches add up to O(1)
       over all blocks and the depth does not inflate the signal.
@@ -109,7 +114,7 @@ class ResidualMLP:
     """
 
     def __init__(self, in_dim=3, out_dim=3, width=256, depth=8, bias=False, seed=None,
-                 dtype=np.float64, chunk_size=None):
+                 dtype=np.float64, chunk_size=None, input_scale=2.0):
         self.in_dim = check_positive_int(in_dim, "in_dim")
         self.out_dim = check_positive_int(out_dim, "out_dim")
         self.width = check_positive_int(width, "width")
@@ -123,6 +128,7 @@ class ResidualMLP:
         self.dtype = dt
         self.chunk_size = None if chunk_size is None else check_positive_int(chunk_size,
                                                                               "chunk_size")
+        self.input_scale = check_positive_float(input_scale, "input_scale")
         self._build_layout()
         self._theta = np.zeros(self.n_params, dtype=self.dtype)
         self._bind_views(self._theta)
@@ -159,7 +165,7 @@ class ResidualMLP:
         """Draw fresh parameters (see the class Notes for the scheme)."""
         g = as_generator(seed)
         w, d, L = self.width, self.in_dim, self.depth
-        self.W0[...] = g.standard_normal(self.W0.shape) * (2.0 / np.sqrt(d))
+        self.W0[...] = g.standard_normal(self.W0.shape) * (self.input_scale / np.sqrt(d))
         self.W1[...] = g.standard_normal(self.W1.shape) * np.sqrt(2.0 / w)
         self.W2[...] = g.standard_normal(self.W2.shape) / np.sqrt(w * max(L, 1))
         self.W3[...] = g.standard_normal(self.W3.shape) * (1e-2 / np.sqrt(w))

@@ -38,6 +38,7 @@ __all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "DEFAULTS"]
 DEFAULTS = dict(
     width=256, depth=8, steps=800, batch=2048, lr=1e-4, lr_min=1e-5, optimizer="adam",
     schedule="cosine", warmup=50, normal_weight=1.0, dtype="float32", init="ridge",
+    input_scale=4.0,
     time_budget=None, tol=None, n_eval=20000, seed=0,
 )
 
@@ -189,7 +190,8 @@ def fit_shape(shape, **options):
 
 def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, steps=None,
                 batch=None, lr=None, lr_min=None, optimizer=None, schedule=None, warmup=None,
-                normal_weight=None, dtype=None, init=None, time_budget=None, tol=None,
+                normal_weight=None, dtype=None, init=None, input_scale=None, time_budget=None,
+                tol=None,
                 n_eval=None, seed=None, checkpoint=None, checkpoint_every=500, resume=False,
                 progress=True, callback=None, history_every=50):
     """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
@@ -221,6 +223,10 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         "ridge" (default) sets the output layer of a fresh network by regularised least squares
         on its initial features, so training starts from the best linear read-out instead of a
         point (see docs/fitting.md for the measured effect).
+    input_scale : float
+        First-layer scale of a fresh network (default 4: ``W0`` std ``4 / sqrt(3)``; the
+        network's own default is 2). Larger values give features that vary faster over the
+        sphere; measured in docs/fitting.md.
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step).
     tol : float, optional
@@ -248,7 +254,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     o = dict(DEFAULTS)
     given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
                  optimizer=optimizer, schedule=schedule, warmup=warmup,
-                 normal_weight=normal_weight, dtype=dtype, init=init, time_budget=time_budget,
+                 normal_weight=normal_weight, dtype=dtype, init=init, input_scale=input_scale,
+                 time_budget=time_budget,
                  tol=tol, n_eval=n_eval, seed=seed)
     o.update({k: v for k, v in given.items() if v is not None})
     _check_options(o)
@@ -265,7 +272,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         start, history, elapsed0 = state["step"], state["history"], state["seconds"]
     else:
         if net is None:
-            net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype)
+            net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype,
+                              input_scale=o["input_scale"])
             if o["init"] == "ridge":
                 _ridge_readout(net, target, rng)
         else:
@@ -376,6 +384,7 @@ def _check_options(o):
     check_positive_float(o["lr"], "lr")
     check_positive_float(o["lr_min"], "lr_min", allow_zero=True)
     check_positive_float(o["normal_weight"], "normal_weight", allow_zero=True)
+    check_positive_float(o["input_scale"], "input_scale")
     check_choice(o["optimizer"], "optimizer", {"adam", "rmsprop", "sgd"})
     check_choice(o["schedule"], "schedule", {"constant", "cosine"})
     check_choice(o["dtype"], "dtype", {"float32", "float64"})
@@ -426,7 +435,8 @@ def _evaluate(surface, target, n_eval):
 
 def _resume_key(target, o, net):
     keep = {k: o[k] for k in ("width", "depth", "steps", "batch", "lr", "lr_min", "optimizer",
-                              "schedule", "warmup", "normal_weight", "dtype", "init")}
+                              "schedule", "warmup", "normal_weight", "dtype", "init",
+                              "input_scale")}
     keep["seed"] = o["seed"] if isinstance(o["seed"], (int, np.integer)) else "generator"
     keep["target"] = target.fingerprint
     keep["warm_start"] = None if net is None else _fingerprint(net.theta, None)
