@@ -46,6 +46,7 @@ class Progress:
         self.t0 = time.perf_counter()
         self._last = -1e9
         self._drawn = False
+        self._first = None  # (time, done) of the first update: the ETA leaves out warm-up
 
     def update(self, done, force=False, **fields):
         if not self.enabled:
@@ -56,7 +57,11 @@ class Progress:
         self._last = now
         elapsed = now - self.t0
         frac = min(max(done / self.total, 0.0), 1.0)
-        eta = elapsed / frac - elapsed if frac > 0 else float("nan")
+        if self._first is None:
+            self._first = (now, done)
+        t1, d1 = self._first
+        # rate from the first update on, so that compilation and set-up do not inflate it
+        eta = (self.total - done) * (now - t1) / (done - d1) if done > d1 else float("nan")
         width = 20
         bar = "#" * int(round(frac * width))
         info = "  ".join(f"{k} {v}" for k, v in fields.items())

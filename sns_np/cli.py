@@ -229,7 +229,7 @@ def _cmd_fit(args):
         raise ValueError(f"--resume: no checkpoint at {ckpt}")
     V, F = load(args.mesh)
     surface, report = fit_mesh(V, F, checkpoint=ckpt, resume=args.resume,
-                               progress=not args.quiet, source=str(args.mesh),
+                               progress=not args.quiet, source=str(Path(args.mesh).resolve()),
                                **_fit_kwargs(args))
     surface.save(out)
     print(report.summary())
