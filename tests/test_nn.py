@@ -274,6 +274,7 @@ def test_bad_inputs_are_rejected():
         net.save("model.txt")
 
 
+@pytest.mark.slow_nojit
 def test_large_input_is_chunked_and_bounded():
     """1,000,000 points through a wide network: works, and the result matches small calls."""
     net = make_net(40, 1, False)

@@ -53,7 +53,8 @@ _NBLK = 64
 def _exp_parts(z, p, ib):
     """p[j] * 2^n[j] = exp(-|z[j]|): the mantissa polynomial in p, the 2^n bits in ib."""
     for j in range(z.shape[0]):
-        t = max(-abs(z[j]), -708.0)
+        t = max(-abs(float(z[j])), -708.0)  # float64 even for float32 z (NumPy 2 would keep
+        # float32 without the JIT, and the 1.5 * 2^52 rounding trick needs float64)
         n = (t * _LOG2E + _SHIFT) - _SHIFT
         r = (t - n * _LN2_HI) - n * _LN2_LO
         p[j] = 1.0 + r * (1.0 + r * (1 / 2 + r * (1 / 6 + r * (1 / 24 + r * (
