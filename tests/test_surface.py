@@ -73,6 +73,7 @@ def test_position_normal_loss_cotangents_by_differences():
         assert np.isclose((f(y, JD + e) - f(y, JD - e)) / (2 * h), dJD[idx], atol=1e-8)
 
 
+@pytest.mark.slow_nojit
 def test_fit_shape_reduces_error_and_reports_in_input_units():
     E = Ellipsoid(2.0, 2.6, 1.4)  # twice the size of the ellipsoid: units matter
     _, r_random = fit_shape(E, steps=1, init="random", **TINY)
@@ -87,6 +88,7 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     assert S.net.dtype == np.float64 and len(r.history["loss"]) == 6
 
 
+@pytest.mark.slow_nojit
 def test_time_budget_tolerance_and_callback_stop():
     E = Ellipsoid(1.0, 1.3, 0.7)
     _, r = fit_shape(E, steps=10_000, time_budget=0.5, **TINY)
@@ -97,6 +99,7 @@ def test_time_budget_tolerance_and_callback_stop():
     assert r.stopped == "callback" and r.steps == 100
 
 
+@pytest.mark.slow_nojit
 def test_checkpoint_resume_is_exact(tmp_path):
     E = Ellipsoid(1.0, 1.3, 0.7)
     opts = dict(steps=40, dtype="float64", **TINY)
@@ -120,6 +123,7 @@ def test_checkpoint_resume_is_exact(tmp_path):
     assert SphericalNeuralSurface.load(ck).net.n_params == S_res.net.n_params
 
 
+@pytest.mark.slow_nojit
 def test_divergence_stops_with_message():
     E = Ellipsoid(1.0, 1.3, 0.7)
 
