@@ -62,6 +62,22 @@ def _add_fit_options(p):
     g.add_argument("--seed", type=int, help="random seed (default 0)")
 
 
+def _add_flow_options(p, points_help):
+    """The options heat and mcf share: time, snapshots, sampling, refits, output."""
+    p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
+    p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
+    p.add_argument("--snapshots", type=_positive_int, default=10,
+                   help="number of snapshots after t = 0 (10)")
+    p.add_argument("--points", type=_positive_int,
+                   help=f"{points_help} (default: at the stability limit)")
+    p.add_argument("--refit-steps", type=int, help="refit steps per time step (100)")
+    p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
+    p.add_argument("--force", action="store_true", help="ignore the stability limit")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", required=True, help="output folder (must not exist)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def _fit_kwargs(args):
     keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
             "normal_weight", "dtype", "seed")
@@ -138,20 +154,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--field", required=True,
                    help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
                         "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
-    p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
-    p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
     p.add_argument("--method", choices=["network", "spectral"], default="network")
-    p.add_argument("--snapshots", type=_positive_int, default=10,
-                   help="number of snapshots after t = 0 (10)")
-    p.add_argument("--points", type=_positive_int,
-                   help="sample points of the network scheme (default: at the stability limit)")
-    p.add_argument("--refit-steps", type=int, help="refit steps per time step (100)")
     p.add_argument("-k", type=_positive_int, help="eigenmodes of the spectral scheme (50)")
-    p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
-    p.add_argument("--force", action="store_true", help="ignore the stability limit")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-o", "--output", required=True, help="output folder (must not exist)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_flow_options(p, "sample points of the network scheme")
     p.set_defaults(func=_cmd_heat)
 
     p = sub.add_parser("mcf", help="mean curvature flow of a model",
@@ -159,19 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "X_t = -2 H n and write PLY snapshots (normal, H, K per vertex) and the "
                        "snapshot models into a new output folder, written atomically.")
     p.add_argument("model", help="fitted model (.npz)")
-    p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
-    p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
-    p.add_argument("--snapshots", type=_positive_int, default=10,
-                   help="number of snapshots after t = 0 (10)")
-    p.add_argument("--points", type=_positive_int,
-                   help="sample points per step (default: at the stability limit)")
-    p.add_argument("--refit-steps", type=int, help="refit steps per time step (100)")
     p.add_argument("--lr", type=_positive_float, help="refit learning rate (1e-4)")
-    p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
-    p.add_argument("--force", action="store_true", help="ignore the stability limit")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-o", "--output", required=True, help="output folder (must not exist)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_flow_options(p, "sample points per step")
     p.set_defaults(func=_cmd_mcf)
     return parser
 
