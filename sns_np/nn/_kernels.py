@@ -43,6 +43,7 @@ _SHIFT = 6755399441055744.0  # 1.5 * 2**52: adding and subtracting it rounds to 
 
 _JIT = dict(cache=True, fastmath={"contract"}, error_model="numpy")
 _PJIT = dict(_JIT, parallel=True)
+_SJIT = dict(_JIT, nogil=True)  # serial kernels that worker threads run side by side
 
 #: point blocks per parallel kernel call: scratch is allocated once per block, and 64 blocks
 #: balance any thread count up to 64
@@ -101,9 +102,9 @@ def softplus_values(z, out):
             out[i, j] = a[j]
 
 
-@njit(**_PJIT)
-def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
-    """Fused forward jet rule of softplus on all streams of a chunk.
+@njit(**_SJIT)
+def _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, lo, hi):
+    """The fused forward jet rule of softplus on the points lo..hi-1 of a chunk.
 
     Z : (c, S, w) pre-activation streams. With ``has_res`` the residual input R (c, S, w) is
         added, and with ``has_bias`` the bias (w,) is added to the value stream. The complete
@@ -114,49 +115,63 @@ def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
 
     a = s(z);  a_a = s'(z) z_a;  a_ab = s''(z) z_a z_b + s'(z) z_ab
     """
-    c, S, w = Z.shape
-    nblk = min(c, _NBLK)
-    for t in prange(nblk):
-        p = np.empty(w)
-        ib = np.empty(w, np.int64)
-        fb = ib.view(np.float64)
-        s1 = np.empty(w)
-        s2 = np.empty(w)
-        a0 = np.empty(w)
-        for i in range((c * t) // nblk, (c * (t + 1)) // nblk):
-            if has_res:
-                for s in range(1 + m):
-                    for j in range(w):
-                        Z[i, s, j] += R[i, s, j]
-            if has_bias:
+    w = Z.shape[2]
+    p = np.empty(w)
+    ib = np.empty(w, np.int64)
+    fb = ib.view(np.float64)
+    s1 = np.empty(w)
+    s2 = np.empty(w)
+    a0 = np.empty(w)
+    for i in range(lo, hi):
+        if has_res:
+            for s in range(1 + m):
                 for j in range(w):
-                    Z[i, 0, j] += bias[j]
-            z0 = Z[i, 0]
-            _exp_parts(z0, p, ib)
-            _softplus_sigmoid(z0, p, fb, a0, s1, s2)
-            q = 1 + m
-            for a in range(k):
-                for b in range(a, k):
-                    if has_res:
-                        for j in range(w):
-                            out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
-                                            + s1[j] * (Z[i, q, j] + R[i, q, j]))
-                    else:
-                        for j in range(w):
-                            out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
-                                            + s1[j] * Z[i, q, j])
-                    q += 1
-            for a in range(m):
-                for j in range(w):
-                    out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
+                    Z[i, s, j] += R[i, s, j]
+        if has_bias:
             for j in range(w):
-                out[i, 0, j] = a0[j]
-                sig[i, j] = s1[j]
+                Z[i, 0, j] += bias[j]
+        z0 = Z[i, 0]
+        _exp_parts(z0, p, ib)
+        _softplus_sigmoid(z0, p, fb, a0, s1, s2)
+        q = 1 + m
+        for a in range(k):
+            for b in range(a, k):
+                if has_res:
+                    for j in range(w):
+                        out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
+                                        + s1[j] * (Z[i, q, j] + R[i, q, j]))
+                else:
+                    for j in range(w):
+                        out[i, q, j] = (s2[j] * Z[i, 1 + a, j] * Z[i, 1 + b, j]
+                                        + s1[j] * Z[i, q, j])
+                q += 1
+        for a in range(m):
+            for j in range(w):
+                out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
+        for j in range(w):
+            out[i, 0, j] = a0[j]
+            sig[i, j] = s1[j]
 
 
 @njit(**_PJIT)
-def softplus_jet_back(Z, sig, Abar, Zbar, m):
-    """Reverse of the first-order jet rule (value and m first-order streams).
+def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
+    """:func:`_softplus_jet_rows` on a whole chunk, its points split over Numba's threads."""
+    c = Z.shape[0]
+    nblk = min(c, _NBLK)
+    for t in prange(nblk):
+        _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias,
+                           (c * t) // nblk, (c * (t + 1)) // nblk)
+
+
+@njit(**_SJIT)
+def softplus_jet_serial(Z, R, bias, out, sig, m, k, has_res, has_bias):
+    """:func:`_softplus_jet_rows` on a whole chunk in the calling thread, without the GIL."""
+    _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, 0, Z.shape[0])
+
+
+@njit(**_SJIT)
+def _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, lo, hi):
+    """Reverse of the first-order jet rule (value and m first-order streams), points lo..hi-1.
 
     Given cotangents Abar (c, 1+m, w) of a = s(z), a_a = s'(z) z_a, write into Zbar (may alias
     Abar) the cotangents of the pre-activation streams:
@@ -164,10 +179,10 @@ def softplus_jet_back(Z, sig, Abar, Zbar, m):
         zbar_a = s'(z) abar_a
         zbar   = s'(z) abar + s''(z) sum_a abar_a z_a
     """
-    c = Z.shape[0]
     w = Z.shape[2]
-    for i in prange(c):
-        acc = np.zeros(w)
+    acc = np.empty(w)
+    for i in range(lo, hi):
+        acc[:] = 0.0
         for a in range(m):
             for j in range(w):
                 g = Abar[i, 1 + a, j]
@@ -176,6 +191,21 @@ def softplus_jet_back(Z, sig, Abar, Zbar, m):
         for j in range(w):
             s = sig[i, j]
             Zbar[i, 0, j] = s * Abar[i, 0, j] + s * (1.0 - s) * acc[j]
+
+
+@njit(**_PJIT)
+def softplus_jet_back(Z, sig, Abar, Zbar, m):
+    """:func:`_softplus_jet_back_rows` on a whole chunk, split over Numba's threads."""
+    c = Z.shape[0]
+    nblk = min(c, _NBLK)
+    for t in prange(nblk):
+        _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, (c * t) // nblk, (c * (t + 1)) // nblk)
+
+
+@njit(**_SJIT)
+def softplus_jet_back_serial(Z, sig, Abar, Zbar, m):
+    """:func:`_softplus_jet_back_rows` on a whole chunk in the calling thread, without the GIL."""
+    _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, 0, Z.shape[0])
 
 
 # ---------------------------------------------------------------------------------------------

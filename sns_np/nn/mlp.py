@@ -25,8 +25,10 @@ All parameters live in one flat vector ``theta``; the weight matrices are views 
 
 from __future__ import annotations
 
+import math
 import os
 import tempfile
+import threading
 import zipfile
 from pathlib import Path
 
@@ -42,6 +44,7 @@ from .._validation import (
 )
 from ..errors import ModelFileError, ShapeError
 from . import _kernels as K
+from . import _parallel
 
 __all__ = ["ResidualMLP", "n_streams"]
 
@@ -51,9 +54,10 @@ FORMAT_VERSION = 1
 #: widths up to this use the per-point Numba kernels instead of BLAS
 SMALL_WIDTH = 32
 
-#: rows (points x streams) per chunk on the BLAS path: ~1 MB activations per buffer in float64,
-#: so that a layer's input, output and weights stay in the 2 MB L2 cache of each core.
-_ROWS_PER_CHUNK = {np.dtype(np.float64): 2048, np.dtype(np.float32): 2048}
+#: rows (points x streams) per chunk on the BLAS path: 2 MB per activation buffer at width 256
+#: in float64. Measured for the full jet and the training step with one worker per core
+#: (docs/performance.md): 512 to 1536 rows are within noise, 4096 rows lose 10-20%.
+_ROWS_PER_CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
 
 
 def n_streams(m: int, k: int) -> int:
@@ -83,8 +87,9 @@ class ResidualMLP:
     dtype : numpy float dtype
         ``np.float64`` (default) or ``np.float32``: parameters, activations and outputs.
     chunk_size : int, optional
-        Points per chunk in ``jet``/``vjp`` (default: chosen from the number of streams so
-        that activations stay cache-sized). Bounds memory on any input size.
+        Most points per chunk in ``jet``/``vjp`` (default: chosen from the number of streams so
+        that activations stay cache-sized). Bounds memory on any input size. Chunks are
+        shrunk so that the worker threads get equal shares (see docs/performance.md).
     input_scale : float
         Scale of the first layer's initial weights (see Notes); only the initialisation uses it.
 
@@ -404,26 +409,44 @@ class ResidualMLP:
 
     def _forward_blas(self, x, D, m, k, Y):
         n = x.shape[0]
+        c = min(self._chunk(n_streams(m, k)), n)
+        plan = _parallel.plan(n, c)
+        if plan is None:  # threaded products and threaded passes, chunk after chunk
+            self._forward_chunks(x, D, m, k, Y, c, range(-(-n // c)), K.softplus_jet)
+            return
+        workers, c = plan
+        n_chunks = -(-n // c)
+        # whole chunks per worker: single-threaded products and serial passes (_parallel.py)
+        queue = _parallel.TaskQueue(n_chunks)
+        _parallel.run(lambda _: self._forward_chunks(x, D, m, k, Y, c, queue,
+                                                     K.softplus_jet_serial), workers, queue)
+
+    def _forward_chunks(self, x, D, m, k, Y, c, chunks, act):
+        """The jet streams of the chunks ``chunks`` (indices of c-point slices of x) into Y.
+
+        ``act`` is the fused softplus jet kernel (threaded or serial); H, T1, T2 and sig are
+        this call's own scratch, so that several calls can run side by side.
+        """
+        n = x.shape[0]
         S = n_streams(m, k)
         w = self.width
-        c = min(self._chunk(S), n)
         H = np.empty((c, S, w), self.dtype)
         T1 = np.empty((c, S, w), self.dtype)
         T2 = np.empty((c, S, w), self.dtype)
         sig = np.empty((c, w), self.dtype)
         b0, b1, b2, b3 = self._bias_args()
-        for lo in range(0, n, c):
-            hi = min(lo + c, n)
+        for i in chunks:
+            lo, hi = i * c, min(i * c + c, n)
             r = hi - lo
             h, t1, t2, sg = H[:r], T1[:r], T2[:r], sig[:r]
             h2, t12, t22 = h.reshape(r * S, w), t1.reshape(r * S, w), t2.reshape(r * S, w)
             self._first_layer(x[lo:hi], None if D is None else D[lo:hi], m, t1)
-            K.softplus_jet(t1, t1, b0, h, sg, m, k, False, self.bias)
+            act(t1, t1, b0, h, sg, m, k, False, self.bias)
             for blk in range(self.depth):
                 np.matmul(h2, self.W1[blk].T, out=t12)
-                K.softplus_jet(t1, t1, b1[blk], t1, sg, m, k, False, self.bias)
+                act(t1, t1, b1[blk], t1, sg, m, k, False, self.bias)
                 np.matmul(t12, self.W2[blk].T, out=t22)
-                K.softplus_jet(t2, h, b2[blk], h, sg, m, k, True, self.bias)
+                act(t2, h, b2[blk], h, sg, m, k, True, self.bias)
             np.matmul(h2, self.W3.T, out=Y[lo:hi].reshape(r * S, self.out_dim))
             if self.bias:
                 Y[lo:hi, 0, :] += b3
@@ -535,9 +558,45 @@ class ResidualMLP:
 
     def _value_and_grad_blas(self, x, D, m, loss_fn, grad):
         n = x.shape[0]
+        c = min(self._chunk(1 + m), n)
+        plan = _parallel.plan(n, c)
+        if plan is None:  # threaded products and threaded passes, chunk after chunk
+            losses = [0.0] * -(-n // c)
+            self._grad_chunks(x, D, m, loss_fn, grad, c, range(len(losses)), losses,
+                              K.softplus_jet, K.softplus_jet_back)
+            return math.fsum(losses), grad
+        workers, c = plan
+        n_chunks = -(-n // c)
+        losses = [0.0] * n_chunks
+        # Whole chunks per worker (_parallel.py), each with its own gradient accumulator.
+        # Chunks are dealt round-robin, not on demand, and the accumulators are added in
+        # worker order, so that the gradient does not depend on timing. loss_fn is called
+        # under a lock: it never runs concurrently with itself.
+        lock = threading.Lock()
+
+        def locked_loss(y, JD, sl):
+            with lock:
+                return loss_fn(y, JD, sl)
+
+        def work(i):
+            g = grad if i == 0 else np.zeros_like(grad)
+            self._grad_chunks(x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
+                              K.softplus_jet_serial, K.softplus_jet_back_serial)
+            return g
+
+        for g in _parallel.run(work, workers)[1:]:
+            grad += g
+        return math.fsum(losses), grad
+
+    def _grad_chunks(self, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back):
+        """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
+
+        The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
+        kernels (threaded or serial); the tape is this call's own.
+        """
+        n = x.shape[0]
         S = 1 + m
         w, L, o = self.width, self.depth, self.out_dim
-        c = min(self._chunk(S), n)
         dt = self.dtype
         # tape, reused for every chunk
         Z0 = np.empty((c, S, w), dt)
@@ -554,29 +613,28 @@ class ResidualMLP:
         tmp = np.empty((c, S, w), dt)
         gv = self._grad_views(grad)
         b0, b1, b2, b3 = self._bias_args()
-        total = 0.0
-        for lo in range(0, n, c):
-            hi = min(lo + c, n)
+        for i in chunks:
+            lo, hi = i * c, min(i * c + c, n)
             r = hi - lo
             rows = r * S
             Dc = None if D is None else D[lo:hi]
             # forward, keeping the tape
             self._first_layer(x[lo:hi], Dc, m, Z0[:r])
-            K.softplus_jet(Z0[:r], Z0[:r], b0, H[0, :r], SG0[:r], m, 0, False, self.bias)
+            act(Z0[:r], Z0[:r], b0, H[0, :r], SG0[:r], m, 0, False, self.bias)
             for blk in range(L):
                 np.matmul(_flat(H[blk], r), self.W1[blk].T, out=_flat(U[blk], r))
-                K.softplus_jet(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, 0,
-                               False, self.bias)
+                act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, 0, False,
+                    self.bias)
                 np.matmul(_flat(A[blk], r), self.W2[blk].T, out=_flat(Zt[blk], r))
-                K.softplus_jet(Zt[blk, :r], H[blk, :r], b2[blk], H[blk + 1, :r], SGZ[blk, :r],
-                               m, 0, True, self.bias)
+                act(Zt[blk, :r], H[blk, :r], b2[blk], H[blk + 1, :r], SGZ[blk, :r], m, 0, True,
+                    self.bias)
             np.matmul(_flat(H[L], r), self.W3.T, out=_flat(Y, r))
             if self.bias:
                 Y[:r, 0, :] += b3
             y = Y[:r, 0, :]
             JD = np.swapaxes(Y[:r, 1:, :], 1, 2) if m else None
             loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
-            total += float(loss)
+            losses[i] = float(loss)
             Ybar = _pack_cotangents(dy, dJD, m, r, o, dt)
             # backward
             Yb = Ybar.reshape(rows, o)
@@ -585,18 +643,18 @@ class ResidualMLP:
                 gv["b3"] += Ybar[:, 0, :].sum(axis=0)
             np.matmul(Yb, self.W3, out=_flat(hbar, r))
             for blk in range(L - 1, -1, -1):
-                K.softplus_jet_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], hbar[:r], m)
+                act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], hbar[:r], m)
                 gv["W2"][blk] += _flat(hbar, r).T @ _flat(A[blk], r)
                 if self.bias:
                     gv["b2"][blk] += hbar[:r, 0, :].sum(axis=0)
                 np.matmul(_flat(hbar, r), self.W2[blk], out=_flat(abar, r))
-                K.softplus_jet_back(U[blk, :r], SGU[blk, :r], abar[:r], abar[:r], m)
+                act_back(U[blk, :r], SGU[blk, :r], abar[:r], abar[:r], m)
                 gv["W1"][blk] += _flat(abar, r).T @ _flat(H[blk], r)
                 if self.bias:
                     gv["b1"][blk] += abar[:r, 0, :].sum(axis=0)
                 np.matmul(_flat(abar, r), self.W1[blk], out=_flat(tmp, r))
                 hbar[:r] += tmp[:r]
-            K.softplus_jet_back(Z0[:r], SG0[:r], hbar[:r], hbar[:r], m)
+            act_back(Z0[:r], SG0[:r], hbar[:r], hbar[:r], m)
             gv["W0"] += hbar[:r, 0, :].T @ x[lo:hi]
             for a in range(m):
                 if Dc is None:
@@ -605,7 +663,6 @@ class ResidualMLP:
                     gv["W0"] += hbar[:r, 1 + a, :].T @ Dc[:, :, a]
             if self.bias:
                 gv["b0"] += hbar[:r, 0, :].sum(axis=0)
-        return total, grad
 
 
 def _flat(a, r):
