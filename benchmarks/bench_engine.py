@@ -6,7 +6,8 @@ For the reference network (width 256, depth 8, no biases) it prints, per dtype:
 
 * the machine's matrix-product rate for the engine's own product shapes;
 * full ``jet(order=2)`` at 4096 points: time, the same matrix products timed alone, their
-  ratio (the engine's efficiency), and the speed-up over PyTorch's fastest full Hessian;
+  ratio (the engine's efficiency), the same jet on the threaded path (data-parallel chunks
+  off, as with SNS_NP_DATA_PARALLEL=0), and the speed-up over PyTorch's fastest full Hessian;
 * one training step of the reference loss at 2048 points (position MSE + 1e-4 normal error,
   gradient for all 1,050,112 parameters): time, and the speed-up over PyTorch's fastest
   variant.
@@ -19,6 +20,7 @@ The first call of every kernel (Numba compilation) is a warm-up and is never tim
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.util
 import json
 import os
@@ -33,7 +35,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _torch_reference as tref  # noqa: E402
 
-from sns_np.nn import ResidualMLP  # noqa: E402
+from sns_np.nn import ResidualMLP, _parallel  # noqa: E402
 from sns_np.surface.losses import position_normal_loss  # noqa: E402
 
 
@@ -45,6 +47,17 @@ def best_time(fn, repeats=3):
         fn()
         best = min(best, time.perf_counter() - t0)
     return best
+
+
+@contextlib.contextmanager
+def threaded_path():
+    """Switch the engine's data-parallel chunks off (as SNS_NP_DATA_PARALLEL=0 does)."""
+    before = _parallel._enabled
+    _parallel._enabled = False
+    try:
+        yield
+    finally:
+        _parallel._enabled = before
 
 
 def sphere_frame(p):
@@ -140,6 +153,10 @@ def main(argv=None):
               f"{t_big * 1e3:7.1f} ms   efficiency {t_big / t_jet:.2f}   (target >= 0.80); "
               f"against the chunk-shape products ({t_chunked * 1e3:.1f} ms) "
               f"{t_chunked / t_jet:.2f}")
+        with threaded_path():
+            t_thr = best_time(lambda: net.jet(x, 2), repeats)
+        print(f"  the same jet on the threaded path (every product and pass on all threads, "
+              f"chunk after chunk): {t_thr * 1e3:8.1f} ms   efficiency {t_big / t_thr:.2f}")
         R = sphere_frame(x)
         D = np.concatenate([R, x[:, :, None]], axis=2)
         t_dir = best_time(lambda: net.jet(x, 2, directions=D, second=2), repeats)
@@ -162,8 +179,11 @@ def main(argv=None):
 
         t_step = best_time(step, repeats)
         t_mm_train = training_matmul_time(net, n_train, 3, dtype, repeats)
+        with threaded_path():
+            t_step_thr = best_time(step, repeats)
         print(f"training step {n_train} points: {t_step * 1e3:8.1f} ms   products alone "
-              f"{t_mm_train * 1e3:7.1f} ms   efficiency {t_mm_train / t_step:.2f}")
+              f"{t_mm_train * 1e3:7.1f} ms   efficiency {t_mm_train / t_step:.2f}   "
+              f"(threaded path {t_step_thr * 1e3:.1f} ms)")
         if use_torch:
             tt = torch_times(net, x, p, R, q, nt, repeats,
                              (256,) if args.quick else (128, 256, 512))

@@ -18,22 +18,37 @@ __all__ = ["ellipsoid_foot_point", "ellipsoid_geometry", "run_demo"]
 AXES = (1.0, 1.3, 0.7)
 
 
-def ellipsoid_foot_point(x, axes=AXES, iterations=50):
-    """Closest points on the ellipsoid sum (y_i / a_i)^2 = 1 to points x (n, 3) near it.
+def ellipsoid_foot_point(x, axes=AXES, iterations=100):
+    """Closest points on the ellipsoid sum (y_i / a_i)^2 = 1 to points x (n, 3).
 
-    Solves y_i = x_i a_i^2 / (a_i^2 + t) with the constraint, by Newton's method on t.
+    The closest point is y_i = x_i a_i^2 / (a_i^2 + t) for the root t > -min a_i^2 of
+    f(t) = sum x_i^2 a_i^2 / (a_i^2 + t)^2 - 1, which decreases on that interval. Newton's
+    method on t, kept inside a bracket [lo, hi] that shrinks with the sign of f (a step that
+    leaves it is replaced by bisection), so that it converges from any x, also from points deep
+    inside or far outside, where plain Newton from t = 0 overshoots the pole at -min a_i^2.
+    A point with no component along the shortest axis may have two closest points; this
+    returns one of them.
     """
     a2 = np.asarray(axes, dtype=np.float64) ** 2
     x = np.asarray(x, dtype=np.float64)
+    lo = np.full(len(x), -a2.min())
+    # f(hi) <= 0: sum x_i^2 a_i^2 / (a_i^2 + t)^2 <= |x|^2 max a_i^2 / (t + min a_i^2)^2
+    hi = np.maximum(np.sqrt(a2.max()) * np.linalg.norm(x, axis=1) - a2.min(), 0.0)
     t = np.zeros(len(x))
-    for _ in range(iterations):
-        d = a2 + t[:, None]
-        f = (x ** 2 * a2 / d ** 2).sum(axis=1) - 1.0
-        df = (-2.0 * x ** 2 * a2 / d ** 3).sum(axis=1)
-        step = f / df
-        t -= step
-        if np.max(np.abs(step)) < 1e-15:
-            break
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for _ in range(iterations):
+            d = a2 + t[:, None]
+            f = (x ** 2 * a2 / d ** 2).sum(axis=1) - 1.0
+            df = (-2.0 * x ** 2 * a2 / d ** 3).sum(axis=1)
+            lo = np.where(f > 0, t, lo)
+            hi = np.where(f > 0, hi, t)
+            t_new = t - f / df
+            bad = ~((t_new > lo) & (t_new < hi))
+            t_new[bad] = 0.5 * (lo[bad] + hi[bad])
+            done = np.abs(t_new - t) <= 1e-15 * (1.0 + np.abs(t))
+            t = t_new
+            if done.all():
+                break
     return x * a2 / (a2 + t[:, None])
 
 

@@ -4,9 +4,8 @@ deterministic gradients, nested calls, errors from workers, OpenBLAS settings re
 import numpy as np
 import pytest
 
-from sns_np.nn import ResidualMLP
+from sns_np.nn import ResidualMLP, _parallel
 from sns_np.nn import _kernels as K
-from sns_np.nn import _parallel
 
 needs_openblas = pytest.mark.skipif(not _parallel._blas(),
                                     reason="no OpenBLAS whose thread count can be set")

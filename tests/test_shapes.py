@@ -245,3 +245,28 @@ def test_perturbed_ellipsoid_is_not_homogeneous():
     radial = np.einsum("kiab,ka,kb->ki", D2, p, p)
     assert np.abs(radial).max() > 0.05
     assert np.abs(np.einsum("kia,ka->ki", J, p) - S(p)).max() > 0.01
+
+
+def test_ellipsoid_foot_point_from_anywhere():
+    """The demo's closest-point solver: on the ellipsoid, orthogonal residual, no blow-up."""
+    from sns_np.demo import AXES, ellipsoid_foot_point, ellipsoid_geometry
+
+    g = np.random.default_rng(7)
+    d = g.standard_normal((3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    r = np.concatenate([np.full(1000, 1e-3), g.uniform(0.2, 3.0, 1000), np.full(1000, 50.0)])
+    x = d * r[:, None]  # deep inside (where plain Newton from t = 0 diverged), around, far out
+    with np.errstate(all="raise"):
+        y = ellipsoid_foot_point(x)
+        n, H, K = ellipsoid_geometry(y)
+    a = np.asarray(AXES)
+    # (deep inside, a^2 + t is tiny and y = x a^2 / (a^2 + t) loses digits: 1e-9, not 1e-15)
+    assert np.abs(((y / a) ** 2).sum(axis=1) - 1.0).max() < 1e-9
+    res = x - y  # the residual of a closest point is normal to the surface
+    tang = res - np.einsum("ij,ij->i", res, n)[:, None] * n
+    assert np.abs(tang).max() < 1e-10 * max(1.0, np.abs(res).max())
+    # never farther than the nearest of the six axis points (a lower bound on optimality)
+    cand = np.concatenate([np.diag(a), -np.diag(a)])
+    dist_axis = np.linalg.norm(x[:, None, :] - cand[None], axis=2).min(axis=1)
+    assert np.all(np.linalg.norm(res, axis=1) <= dist_axis + 1e-12)
+    assert np.all(np.isfinite(H)) and np.all(K > 0)
