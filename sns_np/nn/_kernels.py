@@ -1,8 +1,11 @@
 """Numba kernels of the derivative engine (private).
 
 Plain functions of arrays and scalars: no validation, no classes (the Python layer in
-:mod:`sns_np.nn.mlp` validates, allocates and picks the kernel). ``prange`` runs only over the
-outer point loop and every kernel writes into preallocated arrays.
+:mod:`sns_np.nn.mlp` validates, allocates and picks the kernel). Every kernel writes into
+preallocated arrays. The fused jet rules exist twice over one row-range body
+(``_softplus_jet_rows``, ``_softplus_jet_back_rows``): threaded (``prange`` over blocks of
+points) for the threaded path, and serial without the GIL (``*_serial``) for the worker
+threads of :mod:`sns_np.nn._parallel`, which run one whole chunk each.
 
 Stream layout
 -------------

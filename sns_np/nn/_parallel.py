@@ -75,6 +75,21 @@ def _loaded_openblas_paths():
     return paths
 
 
+def _numpy_blas_is_openblas(found):
+    """Whether NumPy's products run on an OpenBLAS (only then may it be controlled).
+
+    NumPy >= 1.26 names its BLAS in its build configuration; older ones are trusted only when
+    an OpenBLAS lies inside NumPy's own installation (a wheel's ``numpy.libs``).
+    """
+    import numpy
+
+    try:
+        name = numpy.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"]
+    except Exception:  # noqa: BLE001 (NumPy < 1.26, or a layout we do not know)
+        return any("numpy" in lib.path for lib in found)
+    return "openblas" in str(name).lower()
+
+
 def _find_openblas():
     import numpy  # noqa: F401  (loads NumPy's BLAS, if it has not been loaded yet)
 
@@ -88,6 +103,8 @@ def _find_openblas():
             if hasattr(lib, name) and hasattr(lib, name.replace("set_num", "get_num")):
                 found.append(_OpenBLAS(lib, name))
                 break
+    if not _numpy_blas_is_openblas(found):
+        return []  # MKL, Accelerate, ...: an OpenBLAS of SciPy's would be the wrong one
     # NumPy's own first: its thread count decides the number of workers
     found.sort(key=lambda lib: "numpy" not in lib.path)
     return found
