@@ -505,7 +505,9 @@ class ResidualMLP:
             (c, out_dim, m) (``None`` at order 0) and the slice ``sl`` of the chunk in x. It
             returns the chunk's loss contribution and its cotangents (``dJD`` may be None).
             The total loss is the sum of the contributions, so a mean over all n points must
-            divide by n inside ``loss_fn``.
+            divide by n inside ``loss_fn``. On the data-parallel path the chunks are run by
+            worker threads in no fixed order: calls never overlap (they hold a lock), but
+            ``loss_fn`` must not rely on the order of the slices.
         order : int, 0 or 1
         directions : (n, in_dim, m) float array, optional (default: the coordinate axes)
 
