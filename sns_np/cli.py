@@ -58,6 +58,9 @@ def _add_fit_options(p):
     g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 1e-4)")
     g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
     g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
+    g.add_argument("--input-scale", type=_positive_float,
+                   help="scale of the first layer's initial weights (default 4; larger for "
+                        "detailed meshes, docs/fitting.md)")
     g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
     g.add_argument("--seed", type=int, help="random seed (default 0)")
 
@@ -80,7 +83,7 @@ def _add_flow_options(p, points_help):
 
 def _fit_kwargs(args):
     keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-            "normal_weight", "dtype", "seed")
+            "normal_weight", "input_scale", "dtype", "seed")
     return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
 
 

@@ -188,6 +188,16 @@ def test_fit_info_and_resume(files, tmp_path, capsys):
     code, out, _ = run(["info", model], capsys)
     assert code == 0 and "fit: 5 steps" in out and '"width": 16' in out
 
+    # --input-scale reaches the initialisation (W0 ~ N(0, (scale / sqrt(3))^2)) and the record
+    wide = tmp_path / "wide.npz"
+    code, _, err = run(["fit", files / "ellipsoid.obj", "-o", wide, *TINY_FIT,
+                        "--input-scale", "7"], capsys)
+    assert code == 0, err
+    W = SphericalNeuralSurface.load(wide)
+    assert W.metadata["fit"]["options"]["input_scale"] == 7.0
+    assert 0.75 < W.net.W0.std() / (7 / np.sqrt(3)) < 1.25
+    assert 0.75 < S.net.W0.std() / (4 / np.sqrt(3)) < 1.25  # the default, 4
+
     # resuming the finished fit from its checkpoint gives the same model
     code, _, err = run(argv + ["--resume"], capsys)
     assert code == 0, err
@@ -254,6 +264,8 @@ BAD = {
                           "--optimizer"),
     "negative normal weight": ("fit {d}/ellipsoid.obj -o {o}/m.npz --normal-weight -1 "
                                "--steps 1 --quiet", "normal_weight"),
+    "negative input scale": ("fit {d}/ellipsoid.obj -o {o}/m.npz --input-scale -2",
+                             "--input-scale"),
     "model not .npz": ("fit {d}/ellipsoid.obj -o {o}/m.txt", "must end in"),
     "no output folder": ("eval {d}/model.npz -o {o}/no/s.ply", "does not exist"),
     "checkpoint folder": ("fit {d}/ellipsoid.obj -o {o}/m.npz --checkpoint {o}/no/c.npz",
