@@ -230,8 +230,21 @@ def _cmd_fit(args):
                                **_fit_kwargs(args))
     surface.save(out)
     print(report.summary())
+    hint = _input_scale_hint(report)
+    if hint:
+        print(hint)
     print(f"wrote {out} (checkpoint {ckpt})")
     return 0
+
+
+def _input_scale_hint(report):
+    """A line of advice when a fit of a detailed mesh ran with a small first-layer scale."""
+    scale = report.options.get("input_scale")
+    if report.normal_mean_deg > 5.0 and scale is not None and scale < 20:
+        return (f"hint: the held-out normal error is {report.normal_mean_deg:.1f} deg; detailed "
+                f"meshes fit far better with --input-scale 40 (spot: 13.6 -> 1.9 deg at 800 "
+                f"steps; docs/fitting.md)")
+    return None
 
 
 def _cmd_eval(args):

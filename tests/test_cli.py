@@ -295,3 +295,17 @@ def test_bad_input_one_line_status_2_no_output(case, files, tmp_path, capsys):
     assert words in lines[0]
     assert list(tmp_path.iterdir()) == []                   # nothing written, not even a temp
     assert sorted(files.iterdir()) == before
+
+
+@pytest.mark.parametrize("normal_deg, scale, expect", [(13.6, 4.0, True), (13.6, 40.0, False),
+                                                       (1.0, 4.0, False),
+                                                       (float("nan"), 4.0, False)])
+def test_fit_prints_the_input_scale_hint_only_when_it_applies(normal_deg, scale, expect):
+    from sns_np.cli import _input_scale_hint
+    from sns_np.surface import FitReport
+
+    hint = _input_scale_hint(FitReport(normal_mean_deg=normal_deg,
+                                       options={"input_scale": scale}))
+    assert (hint is not None) == expect
+    if expect:
+        assert "--input-scale 40" in hint and "13.6 deg" in hint
