@@ -152,3 +152,24 @@ def test_worker_errors_propagate_and_blas_settings_are_restored(two_workers):
     assert not _parallel.inside_worker()
     net.jet(x, 1)  # the engine still works after a failed call
     assert [lib.get() for lib in libs] == before
+
+
+@needs_openblas
+def test_a_forked_child_runs_the_engine(two_workers):
+    """After fork the child has no pool threads; its first parallel call must build its own."""
+    import multiprocessing as mp
+
+    net = make_net()
+    x = points(300)
+    ref = net.jet(x, 1)[1]  # the parent's pool exists now
+    ctx = mp.get_context("fork")
+    with ctx.Pool(1) as pool:
+        J = pool.apply_async(_child_jet, (net.pack(), x)).get(timeout=120)  # a hang fails
+    assert np.array_equal(J, ref)
+
+
+def _child_jet(theta, x):
+    net = make_net()
+    net.unpack(theta)
+    assert _parallel.plan(len(x), 37)[0] >= 1
+    return net.jet(x, 1)[1]

@@ -123,7 +123,11 @@ def _blas():
 
 
 def _reset_after_fork():
+    """A forked child has none of the parent's threads: a new pool, and a free lock (a fork
+    in the middle of a parallel section would otherwise leave it held forever)."""
+    global _lock
     _state["pool"], _state["pool_size"] = None, 0
+    _lock = threading.Lock()
 
 
 if hasattr(os, "register_at_fork"):
