@@ -32,6 +32,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from sns_np.mesh import check, load, spherical_embedding  # noqa: E402
+from sns_np.sampling import uniform_sphere  # noqa: E402
 from sns_np.surface import fit_mesh, fit_shape  # noqa: E402
 
 MESHES = {"spot": "spot_triangulated.obj", "max": "max10606.obj",
@@ -88,9 +89,7 @@ def distance_to_mesh(S, V, F, n=20000):
         import igl
     except ImportError:
         return None
-    g = np.random.default_rng(5)
-    p = g.standard_normal((n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = uniform_sphere(n, rng=5)
     d2 = igl.point_mesh_squared_distance(S(p), np.asarray(V, np.float64),
                                          np.asarray(F, np.int64))[0]
     return np.sqrt(d2) / np.linalg.norm(V.max(axis=0) - V.min(axis=0))
@@ -99,9 +98,7 @@ def distance_to_mesh(S, V, F, n=20000):
 def ellipsoid_errors(S, n=20000):
     from sns_np.demo import ellipsoid_foot_point, ellipsoid_geometry
     from sns_np.geometry import differential_quantities
-    g = np.random.default_rng(2024)
-    p = g.standard_normal((n, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = uniform_sphere(n, rng=2024)
     dq = differential_quantities(S, p)
     n_ref, H_ref, _ = ellipsoid_geometry(ellipsoid_foot_point(dq.x))
     ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", dq.n, n_ref), -1, 1)))

@@ -210,22 +210,16 @@ def run(work, n_workers: int, queue: TaskQueue | None = None):
     with _lock, _single_threaded_blas():
         pool = _pool(n_workers - 1)
         futures = [pool.submit(_as_worker, work, i) for i in range(1, n_workers)]
-        results, error = [None] * n_workers, None
-        try:
-            results[0] = _as_worker(work, 0)
-        except BaseException as exc:  # noqa: BLE001 (re-raised below, after the workers)
-            error = exc
-            if queue is not None:
-                queue.close()
-        for i, fut in enumerate(futures, start=1):
+        results, errors = [None] * n_workers, []
+        for i in range(n_workers):
             try:
-                results[i] = fut.result()
-            except BaseException as exc:  # noqa: BLE001
-                error = error or exc
+                results[i] = _as_worker(work, 0) if i == 0 else futures[i - 1].result()
+            except BaseException as exc:  # noqa: BLE001 (re-raised below, after the workers)
+                errors.append(exc)
                 if queue is not None:
                     queue.close()
-        if error is not None:
-            raise error
+        if errors:
+            raise errors[0]
         return results
 
 
