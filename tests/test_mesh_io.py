@@ -1,7 +1,15 @@
 import numpy as np
 import pytest
 
-from sns_np.mesh import MeshError, MeshFileError, check, icosphere, load, write_mesh
+from sns_np.mesh import (
+    MeshError,
+    MeshFileError,
+    MeshRepairWarning,
+    check,
+    icosphere,
+    load,
+    write_mesh,
+)
 
 # spot_* and uv_sphere carry texture coordinates; counts from shared/data/meshes/README.md
 SHARED = {
@@ -190,3 +198,261 @@ def test_spot_quads_share_the_triangulated_positions(mesh_dir):
     Vt, _ = load(mesh_dir / "spot_triangulated.obj")
     Vq, _ = load(mesh_dir / "spot_quadrangulated.obj")
     np.testing.assert_array_equal(Vt, Vq)
+
+
+# ------------------------------------------------------------------ crafted and polygon files
+# (issue 13: every malformed file gives a MeshFileError naming the file and the line/element)
+
+_PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex {nv}\nproperty float x\nproperty float y\n"
+             "property float z\nelement face {nf}\nproperty list uchar int vertex_indices\n"
+             "end_header\n")
+_TET_V = "1 1 1\n1 -1 -1\n-1 1 -1\n-1 -1 1\n"
+_TET_F = "3 0 1 2\n3 0 2 3\n3 0 3 1\n3 1 3 2\n"
+
+
+def _polygon_obj(path, xy, z=None):
+    z = np.zeros(len(xy)) if z is None else z
+    text = "".join(f"v {x:.17g} {y:.17g} {w:.17g}\n" for (x, y), w in zip(xy, z))
+    return _write(path, text + "f " + " ".join(str(i + 1) for i in range(len(xy))) + "\n")
+
+
+def _assert_fold_free(V, F, area):
+    """All triangles turn the polygon's way (+z) and together cover its area exactly once."""
+    t = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])[:, 2] / 2
+    assert np.all(t > 0)
+    assert t.sum() == pytest.approx(area, rel=1e-9)
+
+
+def _shoelace(xy):
+    x, y = xy[:, 0], xy[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def test_nonconvex_quad_takes_its_interior_diagonal(tmp_path):
+    # an arrowhead: the fan from corner 1 (the old best-angle choice) folds over corner 2
+    xy = np.array([[0, 0], [2, 0], [0.5, 0.5], [0, 2]], dtype=float)
+    V, F = load(_polygon_obj(tmp_path / "arrow.obj", xy))
+    _assert_fold_free(V, F, _shoelace(xy))
+
+
+def test_nonconvex_polygon_is_ear_clipped_without_folds(tmp_path):
+    # a comb with 12 teeth (50 corners): no fan works, ear clipping does
+    teeth = []
+    for i in range(12):
+        teeth += [[2 * i, 1], [2 * i + 1, 5], [2 * i + 2, 1]]
+    xy = np.array([[0, 0], [24, 0]] + teeth[::-1], dtype=float)
+    xy = np.unique(xy, axis=0, return_index=True)[1]
+    xy = np.array([[0, 0], [24, 0]] + teeth[::-1], dtype=float)[np.sort(xy)]
+    V, F, rep = load(_polygon_obj(tmp_path / "comb.obj", xy), return_report=True)
+    assert rep.n_polygons_triangulated == 1 and F.shape == (len(xy) - 2, 3)
+    _assert_fold_free(V, F, _shoelace(xy))
+
+
+@pytest.mark.parametrize("k", [1000, 10000])
+def test_large_polygon_is_triangulated(tmp_path, k):
+    # a star with k/2 reflex corners; issue 13 measured 12.7 s for 1,000 corners (quadratic
+    # fans); ear clipping takes ~0.25 s for 10,000 (no timing asserted, STYLE.md 9)
+    t = np.linspace(0, 2 * np.pi, k, endpoint=False)
+    r = np.where(np.arange(k) % 2 == 0, 1.0, 0.7)
+    xy = np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+    V, F = load(_polygon_obj(tmp_path / "star.obj", xy))
+    assert F.shape == (k - 2, 3)
+    _assert_fold_free(V, F, _shoelace(xy))
+
+
+def test_self_crossing_polygons_are_reported(tmp_path):
+    # no split of a bow tie or of a polygon with a crossing loop is fold-free: they are split
+    # as fans (real meshes have such slivers) and the report and a warning say so
+    for name, xy in [("bow.obj", [[0, 0], [1, 1], [1, 0], [0, 1]]),
+                     ("loop.obj", [[0, 0], [3, 0], [3, 2], [1, -1], [0, 2], [-1, 1]]),
+                     ("big.obj", [[np.cos(t), np.sin(t)] for t in np.linspace(0, 6, 12)]
+                      + [[0.5, 0.5], [-2, 0.5]])]:
+        path = _polygon_obj(tmp_path / name, np.array(xy, dtype=float))
+        k = len(xy)
+        V, F, rep = load(path, return_report=True)
+        assert F.shape == (k - 2, 3) and rep.n_polygons_self_crossing == 1
+        assert rep.self_crossing_example == f"{path}: line {k + 1}"
+        with pytest.warns(MeshRepairWarning, match=rf"{name}: split 1 self-crossing polygon as "
+                                                   rf"fans that may fold \(first at .*line"):
+            load(path)
+
+
+@pytest.mark.data
+def test_spot_control_mesh_has_self_crossing_slivers(mesh_dir):
+    # two quads and two pentagons of spot's control mesh cross themselves in their plane
+    *_, rep = load(mesh_dir / "spot_control_mesh.obj", return_report=True)
+    assert rep.n_polygons_self_crossing == 4
+
+
+def test_obj_empty_face_and_index_zero_name_the_line(tmp_path):
+    with pytest.raises(MeshFileError, match=r"e.obj: line 4: a face needs at least 3 corners, "
+                                            r"got 0"):
+        load(_write(tmp_path / "e.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf\nf 1 2 3\n"))
+    with pytest.raises(MeshFileError, match=r"two.obj: line 4: a face needs at least 3"):
+        load(_write(tmp_path / "two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n"))
+    with pytest.raises(MeshFileError, match=r"z.obj: line 4: vertex index 0 in a face; OBJ "
+                                            r"indices start at 1"):
+        load(_write(tmp_path / "z.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n"))
+    with pytest.raises(MeshFileError, match=r"r.obj: line 5: a face refers to vertex 3"):
+        load(_write(tmp_path / "r.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n"))
+
+
+def test_off_short_face_names_the_line(tmp_path):
+    text = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n2 0 1\n"
+    with pytest.raises(MeshFileError, match=r"s.off: line 6: malformed face"):
+        load(_write(tmp_path / "s.off", text))
+
+
+def test_ply_counts_are_checked(tmp_path):
+    # faces that use a vertex the header does not declare
+    head = _PLY_HEAD.format(nv=3, nf=4)
+    body = "1 1 1\n1 -1 -1\n-1 1 -1\n" + _TET_F
+    with pytest.raises(MeshFileError, match=r"few.ply: face 1 \(line 14\) uses vertex 3, but "
+                                            r"the 'vertex' element declares 3 vertices"):
+        load(_write(tmp_path / "few.ply", head + body))
+    # more faces declared than held
+    with pytest.raises(MeshFileError, match=r"more.ply: the PLY header \(line 7\) declares 6 "
+                                            r"'face' elements but the file holds only 4"):
+        load(_write(tmp_path / "more.ply", _PLY_HEAD.format(nv=4, nf=6) + _TET_V + _TET_F))
+    # fewer declared than held: the rest is refused too, not ignored
+    with pytest.raises(MeshFileError, match=r"less.ply: line 17: data after the last element"):
+        load(_write(tmp_path / "less.ply", _PLY_HEAD.format(nv=4, nf=3) + _TET_V + _TET_F))
+    # a face list shorter than its count
+    with pytest.raises(MeshFileError, match=r"short.ply: line 14: malformed 'face' element 0"):
+        load(_write(tmp_path / "short.ply", _PLY_HEAD.format(nv=4, nf=4) + _TET_V
+                    + "3 0 1\n" + _TET_F[8:]))
+    V, F = load(_write(tmp_path / "ok.ply", _PLY_HEAD.format(nv=4, nf=4) + _TET_V + _TET_F))
+    check(V, F)
+
+
+def _binary_ply(nv, nf, V, F, order="<"):
+    head = (f"ply\nformat binary_{'little' if order == '<' else 'big'}_endian 1.0\n"
+            f"element vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n"
+            f"element face {nf}\nproperty list uchar int vertex_indices\nend_header\n")
+    body = np.asarray(V, dtype=order + "f4").tobytes()
+    for f in F:
+        body += np.uint8(len(f)).tobytes() + np.asarray(f, dtype=order + "i4").tobytes()
+    return head.encode() + body
+
+
+@pytest.mark.parametrize("order", ["<", ">"])
+def test_binary_ply(tmp_path, order):
+    V0, F0 = icosphere(1)
+    polys = F0.tolist()
+    path = tmp_path / "b.ply"
+    path.write_bytes(_binary_ply(len(V0), len(polys), V0, polys, order))
+    V, F = load(path)
+    np.testing.assert_array_equal(F, F0)
+    np.testing.assert_allclose(V, V0, atol=1e-6)
+    # a quad among the triangles takes the one-by-one path
+    path.write_bytes(_binary_ply(4, 2, [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+                                 [[0, 1, 2, 3], [0, 3, 2]], order))
+    assert load(path, merge=False)[1].shape == (3, 3)
+    # a header that declares a billion faces in a 200-byte file
+    path.write_bytes(_binary_ply(len(V0), 10**9, V0, polys[:2], order))
+    with pytest.raises(MeshFileError, match=r"b.ply: the PLY header \(line 7\) declares "
+                                            r"1000000000 'face' elements but the file holds "
+                                            r"only 2"):
+        load(path)
+
+
+def test_load_warns_about_repairs(tmp_path):
+    text = ("v 9 9 9\nv 1 1 1\nv 1 -1 -1\nv 7 7 7\nv -1 1 -1\nv -1 -1 1\n"
+            "f 2 3 5\nf 2 5 6\nf 2 6 3\nf 3 6 5\n")
+    path = _write(tmp_path / "t.obj", text)
+    with pytest.warns(MeshRepairWarning, match=r"t.obj: dropped 2 unreferenced vertices"):
+        load(path)
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load(path, return_report=True)               # the report says it; no warning
+
+
+def test_seam_merge_warns(tmp_path):
+    V, F = icosphere(1)
+    F = F.copy()
+    fan = np.flatnonzero((F == 0).any(axis=1))[:3]
+    F[fan] = np.where(F[fan] == 0, len(V), F[fan])
+    path = tmp_path / "seam.obj"
+    write_mesh(path, np.vstack([V, V[:1]]), F)
+    with pytest.warns(MeshRepairWarning, match=r"merged 1 coincident vertex"):
+        load(path)
+
+
+# ------------------------------------------------------------------ property-based tests
+hypothesis = pytest.importorskip("hypothesis")
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+_SETTINGS = settings(max_examples=60, deadline=None,
+                     suppress_health_check=[HealthCheck.function_scoped_fixture])
+
+
+@_SETTINGS
+@given(k=st.integers(3, 300), seed=st.integers(0, 2**32 - 1))
+def test_star_polygons_in_any_plane_are_fold_free(k, seed):
+    # random star-shaped (so simple) polygons, rotated into a random plane
+    from sns_np.mesh._polygons import triangulate
+    g = np.random.default_rng(seed)
+    t = np.sort(g.uniform(0, 2 * np.pi, k))
+    gaps = np.diff(np.r_[t, t[0] + 2 * np.pi])
+    if gaps.min() < 1e-3 or gaps.max() > 3.0:       # star-shaped about 0 needs gaps < pi
+        return
+    r = g.uniform(0.2, 1.0, k)
+    P2 = np.stack([r * np.cos(t), r * np.sin(t)], axis=1)
+    Q = np.linalg.qr(g.standard_normal((3, 3)))[0]
+    V = np.c_[P2, np.zeros(k)] @ Q.T + g.standard_normal(3)
+    F, _, crossed = triangulate(V, [list(range(k))])
+    n = np.cross(Q[:, 0], Q[:, 1])                   # the polygon's normal in 3D
+    assert crossed == []
+    A = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]) @ n / 2
+    assert F.shape == (k - 2, 3)
+    assert np.all(A > -1e-12)
+    assert A.sum() == pytest.approx(_shoelace(P2), rel=1e-9, abs=1e-12)
+
+
+_LINES = st.sampled_from([
+    "v 0 0 0", "v 1 0 0", "v 0 1 0", "v 0 0 1", "v 1 2", "v nan 0 0", "v a b c",
+    "f", "f 1", "f 1 2", "f 1 2 3", "f 1 3 4", "f 0 1 2", "f -1 -2 -3", "f -9 1 2",
+    "f 1/1 2/2 3/3", "f 1//1 x 3", "f 1 2 3 4", "f 1 2 99", "vt 0 1", "# c", "",
+    "f 2 3 4 1 2", "f 1 1 1",
+])
+
+
+def _assert_clean_failure_or_mesh(path, time_limit=2.0):
+    import time
+    import warnings
+    t0 = time.perf_counter()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            V, F = load(path)
+    except MeshFileError as exc:
+        msg = str(exc)
+        assert path.name in msg and "\n" not in msg
+    else:
+        assert V.ndim == 2 and V.shape[1] == 3 and F.ndim == 2 and F.shape[1] == 3
+        assert F.min() >= 0 and F.max() < len(V)
+    assert time.perf_counter() - t0 < time_limit
+
+
+@_SETTINGS
+@given(lines=st.lists(_LINES, max_size=30))
+def test_generated_obj_files_fail_cleanly(tmp_path, lines):
+    _assert_clean_failure_or_mesh(_write(tmp_path / "gen.obj", "\n".join(lines) + "\n"))
+
+
+@_SETTINGS
+@given(nv=st.integers(0, 8), nf=st.integers(0, 8), cut=st.integers(0, 400),
+       junk=st.binary(max_size=20), binary=st.booleans())
+def test_generated_ply_files_fail_cleanly(tmp_path, nv, nf, cut, junk, binary):
+    V = [[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]]
+    F = [[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]]
+    if binary:
+        data = _binary_ply(nv, nf, V, F)
+    else:
+        data = (_PLY_HEAD.format(nv=nv, nf=nf) + _TET_V + _TET_F).encode()
+    data = data[:len(data) - cut] + junk if cut else data + junk
+    path = tmp_path / "gen.ply"
+    path.write_bytes(data)
+    _assert_clean_failure_or_mesh(path)

@@ -30,7 +30,7 @@ from .errors import (
 from .export import write_mesh
 from .foldrepair import FoldRepair
 from .icosphere import icosphere
-from .io import LoadReport, load
+from .io import LoadReport, MeshRepairWarning, load
 from .operators import (
     cotan_laplacian,
     face_angles,
@@ -53,7 +53,7 @@ from .stretch import minimise_stretch
 
 __all__ = [
     # input and checks
-    "load", "LoadReport", "write_mesh", "check", "MeshSummary", "icosphere",
+    "load", "LoadReport", "MeshRepairWarning", "write_mesh", "check", "MeshSummary", "icosphere",
     # operators
     "face_areas", "face_normals", "face_angles", "vertex_normals", "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",

@@ -1,9 +1,11 @@
 """Reading surface meshes from OBJ, OFF, PLY and STL files.
 
-OBJ and OFF are parsed here (only positions and face corners are read, so texture coordinates
-and normals can neither split vertices nor break the reader); PLY and STL go through meshio,
-with trimesh as a fallback. Polygons are triangulated, vertices duplicated along seams are
-merged, unreferenced vertices are dropped, and a :class:`LoadReport` records every change.
+OBJ, OFF and PLY are parsed here (only positions and face corners are read, so texture
+coordinates and normals can neither split vertices nor break the reader); STL goes through
+meshio, with trimesh as a fallback. Polygons are triangulated without folds
+(:mod:`._polygons`), vertices duplicated along seams are merged, unreferenced vertices are
+dropped, and a :class:`LoadReport` records every change; without ``return_report``, a
+:class:`MeshRepairWarning` says what was repaired.
 """
 
 from __future__ import annotations
@@ -17,11 +19,17 @@ from pathlib import Path
 import numpy as np
 
 from ._arrays import unique_edges
+from ._ply import read_ply
+from ._polygons import triangulate
 from .errors import MeshFileError
 
-__all__ = ["LoadReport", "load", "SUPPORTED_FORMATS"]
+__all__ = ["LoadReport", "MeshRepairWarning", "load", "SUPPORTED_FORMATS"]
 
 SUPPORTED_FORMATS = (".obj", ".off", ".ply", ".stl")
+
+
+class MeshRepairWarning(UserWarning):
+    """:func:`load` changed the mesh: merged vertices or dropped faces or vertices."""
 
 
 @dataclass(frozen=True)
@@ -43,6 +51,11 @@ class LoadReport:
         Vertices used by no face (removed; the remaining ones keep their order).
     n_vertices, n_faces : int
         Size of the returned mesh.
+    n_polygons_self_crossing : int
+        Polygons that cross or touch themselves in their best-fit plane (or have zero vector
+        area): no split of them is free of folded triangles, so they were split as a fan.
+    self_crossing_example : str
+        Where the first of them is in the file ("path: line 12"), or "".
     """
 
     path: str
@@ -54,6 +67,31 @@ class LoadReport:
     n_unreferenced_dropped: int
     n_vertices: int
     n_faces: int
+    n_polygons_self_crossing: int = 0
+    self_crossing_example: str = ""
+
+    def repaired(self, expected_merge: bool = False) -> bool:
+        """True when vertices were merged (unless ``expected_merge``), anything was dropped, or
+        a self-crossing polygon was split (its triangles may fold)."""
+        return bool((self.n_vertices_merged and not expected_merge)
+                    or self.n_degenerate_faces_dropped or self.n_unreferenced_dropped
+                    or self.n_polygons_self_crossing)
+
+    def repairs(self) -> str:
+        """The repairs in words, e.g. ``"merged 1 vertex, dropped 2 unreferenced vertices"``."""
+        def count(n, what):
+            return f"{n} {what}" if n == 1 else f"{n} " + what.replace("vertex", "vertice") + "s"
+        parts = []
+        if self.n_vertices_merged:
+            parts.append(f"merged {count(self.n_vertices_merged, 'coincident vertex')}")
+        if self.n_degenerate_faces_dropped:
+            parts.append(f"dropped {count(self.n_degenerate_faces_dropped, 'degenerate face')}")
+        if self.n_unreferenced_dropped:
+            parts.append(f"dropped {count(self.n_unreferenced_dropped, 'unreferenced vertex')}")
+        if self.n_polygons_self_crossing:
+            parts.append(f"split {count(self.n_polygons_self_crossing, 'self-crossing polygon')} "
+                         f"as fans that may fold (first at {self.self_crossing_example})")
+        return ", ".join(parts) or "no repairs"
 
     @property
     def changed(self) -> bool:
@@ -63,7 +101,7 @@ class LoadReport:
 
 
 def _read_obj(path):
-    vs, polys = [], []
+    vs, polys, lines = [], [], []
     with open(path, encoding="utf-8", errors="replace") as fh:
         for lineno, line in enumerate(fh, 1):
             parts = line.split()
@@ -81,38 +119,60 @@ def _read_obj(path):
                     idx = [int(t.split("/", 1)[0]) for t in parts[1:]]
                 except ValueError:
                     raise MeshFileError(f"{path}: line {lineno}: cannot parse face "
-                                        f"{line.strip()!r}") from None
+                                        f"{_clip(line)!r}") from None
+                if len(idx) < 3:
+                    raise MeshFileError(f"{path}: line {lineno}: a face needs at least 3 "
+                                        f"corners, got {len(idx)}")
+                if 0 in idx:
+                    raise MeshFileError(f"{path}: line {lineno}: vertex index 0 in a face; OBJ "
+                                        "indices start at 1 (negative ones count back)")
                 nv = len(vs)
                 # OBJ indices are 1-based; negative ones count back from the latest vertex
                 polys.append([i - 1 if i > 0 else nv + i for i in idx])
+                lines.append(lineno)
     try:
         V = np.array(vs, dtype=np.float64).reshape(-1, 3)
     except ValueError as exc:
         raise MeshFileError(f"{path}: cannot parse vertex coordinates ({exc})") from None
-    return V, polys
+    return V, polys, lambda f: f"{path}: line {lines[f]}"
 
 
 def _read_off(path):
     with open(path, encoding="utf-8", errors="replace") as fh:
-        tokens = [ln.split("#", 1)[0].split() for ln in fh]
-    lines = [t for t in tokens if t]
-    if not lines or not lines[0][0].endswith("OFF"):
+        tokens = [(i, ln.split("#", 1)[0].split()) for i, ln in enumerate(fh, 1)]
+    lines = [(i, t) for i, t in tokens if t]
+    if not lines or not lines[0][1][0].endswith("OFF"):
         raise MeshFileError(f"{path}: not an OFF file (the first line must be 'OFF')")
-    head = lines[0][1:] if len(lines[0]) > 1 else lines[1]
-    body = lines[1:] if len(lines[0]) > 1 else lines[2:]
+    if len(lines[0][1]) > 1:
+        head, body = lines[0][1][1:], lines[1:]
+    elif len(lines) > 1:
+        head, body = lines[1][1], lines[2:]
+    else:
+        raise MeshFileError(f"{path}: the OFF header has no counts")
     try:
         nv, nf = int(head[0]), int(head[1])
-        V = np.array([ln[:3] for ln in body[:nv]], dtype=np.float64).reshape(-1, 3)
-        polys = []
-        for ln in body[nv:nv + nf]:
-            k = int(ln[0])
-            polys.append([int(t) for t in ln[1:1 + k]])
+        V = np.array([ln[:3] for _, ln in body[:nv]], dtype=np.float64).reshape(-1, 3)
     except (ValueError, IndexError) as exc:
         raise MeshFileError(f"{path}: malformed OFF data ({exc})") from None
+    polys, where = [], [i for i, _ in body[nv:nv + nf]]
+    for lineno, ln in body[nv:nv + nf]:
+        try:
+            k = int(ln[0])
+            if k < 3 or len(ln) < 1 + k:
+                raise ValueError(f"{k} corners declared, {len(ln) - 1} values given")
+            polys.append([int(t) for t in ln[1:1 + k]])
+        except ValueError as exc:
+            raise MeshFileError(f"{path}: line {lineno}: malformed face ({exc}); a face "
+                                "needs at least 3 corners") from None
     if V.shape[0] != nv or len(polys) != nf:
         raise MeshFileError(f"{path}: the header announces {nv} vertices and {nf} faces, the "
                             f"file holds {V.shape[0]} and {len(polys)}")
-    return V, polys
+    return V, polys, lambda f: f"{path}: line {where[f]}"
+
+
+def _clip(text, n=60):
+    text = text.strip()
+    return text if len(text) <= n else text[:n] + "..."
 
 
 def _read_meshio_or_trimesh(path):
@@ -154,50 +214,6 @@ def _read_meshio_or_trimesh(path):
     raise MeshFileError(f"cannot read mesh file {path}: " + "; ".join(errors))
 
 
-def _triangulate(V, polys):
-    """Triangles of all faces; a k-gon becomes a fan from the corner maximising the min angle."""
-    sizes = np.fromiter((len(p) for p in polys), dtype=np.int64, count=len(polys))
-    if sizes.size and sizes.min() < 3:
-        f = int(np.argmax(sizes < 3))
-        raise MeshFileError(f"face {f} has {int(sizes[f])} corners; expected at least 3")
-    tris, order = [], []
-    for k in np.unique(sizes):
-        idx = np.flatnonzero(sizes == k)
-        P = np.array([polys[i] for i in idx], dtype=np.int64)
-        if k == 3:
-            tris.append(P)
-            order.append(idx)
-            continue
-        best, best_angle = None, None
-        for a in range(k):
-            R = np.roll(P, -a, axis=1)
-            T = np.stack([np.stack([R[:, 0], R[:, i], R[:, i + 1]], axis=1)
-                          for i in range(1, k - 1)], axis=1)          # (p, k-2, 3)
-            ang = _min_angle(V, T)
-            if best is None:
-                best, best_angle = T, ang
-            else:
-                better = ang > best_angle
-                best[better], best_angle[better] = T[better], ang[better]
-        tris.append(best.reshape(-1, 3))
-        order.append(np.repeat(idx, k - 2))
-    F = np.concatenate(tris)
-    # keep the file's face order (triangles of one polygon stay together)
-    return F[np.argsort(np.concatenate(order), kind="stable")], int((sizes > 3).sum())
-
-
-def _min_angle(V, T):
-    """Smallest corner angle over the triangles of each fan, T (p, t, 3) -> (p,)."""
-    P = V[T]
-    worst = np.full(T.shape[:2], np.pi)
-    for c in range(3):
-        u = P[..., (c + 1) % 3, :] - P[..., c, :]
-        v = P[..., (c + 2) % 3, :] - P[..., c, :]
-        ang = np.arctan2(np.linalg.norm(np.cross(u, v), axis=-1), np.einsum("...i,...i", u, v))
-        worst = np.minimum(worst, ang)
-    return worst.min(axis=1)
-
-
 def _merge_coincident(V, F):
     _, first, inv = np.unique(V, axis=0, return_index=True, return_inverse=True)
     inv = inv.reshape(-1)
@@ -226,7 +242,9 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
         vertices duplicated along texture seams; a closed mesh with two coincident but separate
         vertices is left alone.
     return_report : bool
-        Also return a :class:`LoadReport`.
+        Also return a :class:`LoadReport`. Without it, a :class:`MeshRepairWarning` names
+        the repairs, if any (merged vertices, except in STL files, which always store a soup;
+        dropped degenerate faces; dropped unreferenced vertices). The winding is never changed.
 
     Returns
     -------
@@ -238,7 +256,9 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
     ------
     MeshFileError
         Missing or unreadable file, unsupported format, non-finite coordinates, out-of-range
-        face indices or an empty mesh; the message names the file.
+        face indices (OBJ index 0 too), a face with fewer than 3 corners, a polygon without a
+        fold-free triangulation, header counts that the data do not match, or an empty mesh;
+        the message names the file and the line (OBJ, OFF, ASCII PLY) or the element.
 
     Examples
     --------
@@ -263,11 +283,14 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
                             f"{', '.join(SUPPORTED_FORMATS)}")
     try:
         if ext == ".obj":
-            V, polys = _read_obj(path)
+            V, polys, where = _read_obj(path)
         elif ext == ".off":
-            V, polys = _read_off(path)
+            V, polys, where = _read_off(path)
+        elif ext == ".ply":
+            V, polys, where = read_ply(path)
         else:
             V, polys = _read_meshio_or_trimesh(path)
+            where = lambda f: f"{path}: face {f}"  # noqa: E731
     except (OSError, UnicodeError) as exc:
         raise MeshFileError(f"cannot read mesh file {path}: {exc}") from None
     n_read, f_read = V.shape[0], len(polys)
@@ -278,15 +301,14 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
         i = int(np.argwhere(~np.isfinite(V))[0, 0])
         raise MeshFileError(f"{path}: vertex {i} has non-finite coordinates {V[i].tolist()}; "
                             "expected finite numbers")
-    lo = min(min(p) for p in polys)
-    hi = max(max(p) for p in polys)
-    if lo < 0 or hi >= n_read:
-        raise MeshFileError(f"{path}: a face refers to vertex {lo if lo < 0 else hi} (0-based) "
-                            f"but the file has {n_read} vertices")
-    try:
-        F, n_poly = _triangulate(V, polys)
-    except MeshFileError as exc:
-        raise MeshFileError(f"{path}: {exc}") from None
+    for f, p in enumerate(polys):
+        if len(p) < 3:
+            raise MeshFileError(f"{where(f)}: a face needs at least 3 corners, got {len(p)}")
+        lo, hi = min(p), max(p)
+        if lo < 0 or hi >= n_read:
+            raise MeshFileError(f"{where(f)}: a face refers to vertex {lo if lo < 0 else hi} "
+                                f"(0-based) but the file has {n_read} vertices")
+    F, n_poly, crossed = triangulate(V, polys)
 
     n_merged = 0
     if merge is True or (merge == "auto" and ext == ".stl"):
@@ -310,11 +332,16 @@ def load(path, *, merge: str | bool = "auto", return_report: bool = False):
     if F.shape[0] == 0:
         raise MeshFileError(f"{path}: no faces left after removing degenerate ones")
     V, F = np.ascontiguousarray(V), np.ascontiguousarray(F, dtype=np.int64)
-    if not return_report:
-        return V, F
     report = LoadReport(path=str(path), n_vertices_read=n_read, n_faces_read=f_read,
                         n_polygons_triangulated=n_poly, n_vertices_merged=n_merged,
                         n_degenerate_faces_dropped=n_bad, n_unreferenced_dropped=n_unused,
-                        n_vertices=V.shape[0], n_faces=F.shape[0])
+                        n_vertices=V.shape[0], n_faces=F.shape[0],
+                        n_polygons_self_crossing=len(crossed),
+                        self_crossing_example=where(crossed[0]) if crossed else "")
+    if not return_report:
+        if report.repaired(expected_merge=ext == ".stl"):
+            warnings.warn(f"{path}: {report.repairs()}; pass return_report=True for the "
+                          "counts", MeshRepairWarning, stacklevel=2)
+        return V, F
     return V, F, report
 
