@@ -271,16 +271,23 @@ def _cmd_info(args):
     meta = dict(S.metadata)
     fit = meta.pop("fit", None)
     for k, v in meta.items():
-        print(f"  {k}: {v}")
+        print(f"  {_printable(k)}: {_printable(v)}")
     if fit:
         print(f"  fit: {fit.get('steps')} steps, {fit.get('seconds', 0):.1f} s, stopped by "
-              f"{fit.get('stopped')}; held-out position error {fit.get('position_mean'):.3g} "
+              f"{_printable(fit.get('stopped'))}; held-out position error "
+              f"{fit.get('position_mean'):.3g} "
               f"(relative {fit.get('position_relative'):.2e}), normal error "
               f"{fit.get('normal_mean_deg'):.3f} deg")
         opts = fit.get("options", {})
         if opts:
             print(f"  fit options: {json.dumps(opts)}")
     return 0
+
+
+def _printable(value):
+    """str(value) with control and other non-printable characters escaped (metadata comes
+    from a file: a terminal escape sequence must not reach the terminal)."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in str(value))
 
 
 def _cmd_eigen(args):
