@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import _npz
 from ._validation import as_points, check_order, check_positive_float, check_positive_int
 from .errors import ModelFileError, ShapeError
 from .nn.mlp import SMALL_WIDTH, ResidualMLP, load_npz, save_npz
@@ -124,15 +125,18 @@ class NeuralField:
     @classmethod
     def from_state(cls, data, prefix: str = "", source: str = "state") -> NeuralField:
         key = f"{prefix}format"
-        if key not in data or str(data[key]) != FORMAT:
-            found = str(data[key]) if key in data else "nothing"
-            raise ModelFileError(f"{source}: expected a {FORMAT} (field {key!r}), found {found}")
-        version = int(data[f"{prefix}format_version"])
+        found = (_npz.field(data, key, source, kinds="U", what="text") if key in data
+                 else "nothing")
+        if found != FORMAT:
+            raise ModelFileError(f"{source}: expected a {FORMAT} (field {key!r}), found "
+                                 f"{found[:80]!r}")
+        version = _npz.int_field(data, f"{prefix}format_version", source)
         if version != FORMAT_VERSION:
             raise ModelFileError(f"{source}: field format version {version} is not supported")
+        scale = _npz.field(data, f"{prefix}scale", source, kinds="fiu", what="a number")
         net = ResidualMLP.from_state(data, prefix=f"{prefix}net.", source=source)
         try:
-            return cls(net=net, scale=float(data[f"{prefix}scale"]))
+            return cls(net=net, scale=float(scale))
         except ValueError as exc:
             raise ModelFileError(f"{source}: invalid field ({exc})") from None
 
@@ -143,8 +147,11 @@ class NeuralField:
     @classmethod
     def load(cls, path) -> NeuralField:
         """Read a field written by :meth:`save`."""
-        with load_npz(path) as data:
-            return cls.from_state(data, source=str(path))
+        try:
+            with load_npz(path) as data:
+                return cls.from_state(data, source=str(path))
+        except (RecursionError, MemoryError) as exc:   # a last line of defence: one line
+            raise ModelFileError(f"{path}: cannot be read ({type(exc).__name__})") from None
 
 
 # ------------------------------------------------------------------------------ losses

@@ -29,11 +29,12 @@ import math
 import os
 import tempfile
 import threading
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from .. import _npz
+from .._npz import load_npz
 from .._validation import (
     as_float_array,
     as_generator,
@@ -46,7 +47,7 @@ from ..errors import ModelFileError, ShapeError
 from . import _kernels as K
 from . import _parallel
 
-__all__ = ["ResidualMLP", "n_streams"]
+__all__ = ["ResidualMLP", "n_streams", "load_npz", "save_npz"]
 
 FORMAT = "sns_np.ResidualMLP"
 FORMAT_VERSION = 1
@@ -120,6 +121,11 @@ class ResidualMLP:
 
     def __init__(self, in_dim=3, out_dim=3, width=256, depth=8, bias=False, seed=None,
                  dtype=np.float64, chunk_size=None, input_scale=2.0):
+        self._setup(in_dim, out_dim, width, depth, bias, dtype, chunk_size, input_scale)
+        self.initialize(seed)
+
+    def _setup(self, in_dim, out_dim, width, depth, bias, dtype, chunk_size, input_scale):
+        """Check the architecture and allocate zero parameters (no random draw)."""
         self.in_dim = check_positive_int(in_dim, "in_dim")
         self.out_dim = check_positive_int(out_dim, "out_dim")
         self.width = check_positive_int(width, "width")
@@ -137,7 +143,35 @@ class ResidualMLP:
         self._build_layout()
         self._theta = np.zeros(self.n_params, dtype=self.dtype)
         self._bind_views(self._theta)
-        self.initialize(seed)
+
+    @classmethod
+    def zeros(cls, in_dim=3, out_dim=3, width=256, depth=8, bias=False, dtype=np.float64,
+              chunk_size=None) -> ResidualMLP:
+        """A network of the given architecture with all parameters zero (nothing drawn).
+
+        The way to build a network whose parameters come from elsewhere (a file, another
+        network): fill it with :meth:`unpack` or through :attr:`theta`.
+
+        Examples
+        --------
+        >>> net = ResidualMLP.zeros(width=4, depth=1)
+        >>> net.n_params, float(abs(net.theta).max())
+        (56, 0.0)
+        """
+        net = cls.__new__(cls)
+        net._setup(in_dim, out_dim, width, depth, bias, dtype, chunk_size, 2.0)
+        return net
+
+    @staticmethod
+    def count_params(in_dim, out_dim, width, depth, bias=False) -> int:
+        """Number of parameters of an architecture, in exact integer arithmetic.
+
+        ``w d + 2 L w^2 + o w`` plus ``w + 2 L w + o`` biases (d = in_dim, o = out_dim,
+        w = width, L = depth); for the reference network (3, 3, 256, 8): 1,050,112.
+        """
+        d, o, w, L = (int(v) for v in (in_dim, out_dim, width, depth))
+        n = w * d + 2 * L * w * w + o * w
+        return n + (w + 2 * L * w + o if bias else 0)
 
     # ------------------------------------------------------------------ parameters
     def _build_layout(self):
@@ -206,16 +240,18 @@ class ResidualMLP:
 
     def copy(self) -> ResidualMLP:
         """An independent network with the same architecture and parameters."""
-        new = ResidualMLP(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
-                          seed=0, dtype=self.dtype, chunk_size=self.chunk_size)
-        new.unpack(self._theta)
+        new = ResidualMLP.zeros(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
+                                dtype=self.dtype, chunk_size=self.chunk_size)
+        new._theta[...] = self._theta
+        new.input_scale = self.input_scale
         return new
 
     def astype(self, dtype) -> ResidualMLP:
         """The same network with parameters converted to ``dtype``."""
-        new = ResidualMLP(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
-                          seed=0, dtype=dtype, chunk_size=self.chunk_size)
+        new = ResidualMLP.zeros(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
+                                dtype=dtype, chunk_size=self.chunk_size)
         new.unpack(self._theta.astype(dtype))
+        new.input_scale = self.input_scale
         return new
 
     def architecture(self) -> dict:
@@ -243,39 +279,48 @@ class ResidualMLP:
 
     @classmethod
     def from_state(cls, data, prefix: str = "", source: str = "state") -> ResidualMLP:
-        """Rebuild a network from :meth:`state` arrays, checking every field."""
+        """Rebuild a network from :meth:`state` arrays, checking every field.
 
-        def get(key):
-            full = prefix + key
-            if full not in data:
-                raise ModelFileError(f"{source}: missing field {full!r}; not a {FORMAT} file")
-            return data[full]
-
-        fmt = str(get("format"))
+        ``data`` is a dict of arrays or an open file (:func:`load_npz`). The parameter count
+        implied by the architecture fields is compared with the declared shape of ``theta``
+        before anything of that size is allocated, and the parameters are read straight into
+        the new network's buffer (no random initialisation is drawn).
+        """
+        if prefix + "format" not in data:
+            raise ModelFileError(f"{source}: missing field {prefix + 'format'!r}; not a "
+                                 f"{FORMAT} file")
+        fmt = _npz.field(data, prefix + "format", source, kinds="U", what="text")
         if fmt != FORMAT:
             raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}")
-        version = int(get("format_version"))
+        version = _npz.int_field(data, prefix + "format_version", source)
         if version != FORMAT_VERSION:
             raise ModelFileError(f"{source}: format version {version} is not supported "
                                  f"(this sns_np reads version {FORMAT_VERSION})")
-        try:
-            arch = {k: int(get(k)) for k in ("in_dim", "out_dim", "width", "depth")}
-            bias = bool(get("bias"))
-            dtype = np.dtype(str(get("dtype")))
-        except (TypeError, ValueError) as exc:
-            raise ModelFileError(f"{source}: malformed architecture fields ({exc})") from None
-        theta = np.asarray(get("theta"))
-        try:
-            net = cls(**arch, bias=bias, dtype=dtype, seed=0)
-        except ValueError as exc:
-            raise ModelFileError(f"{source}: invalid architecture ({exc})") from None
-        if theta.shape != (net.n_params,) or theta.dtype != net.dtype:
+        arch = {k: _npz.int_field(data, prefix + k, source, minimum=0 if k == "depth" else 1)
+                for k in ("in_dim", "out_dim", "width", "depth")}
+        bias = _npz.field(data, prefix + "bias", source, kinds="b", what="True or False")
+        name = _npz.field(data, prefix + "dtype", source, kinds="U", what="a dtype name")
+        if name not in ("float32", "float64"):
+            raise ModelFileError(f"{source}: field {prefix + 'dtype'!r} must be 'float32' or "
+                                 f"'float64', got {name[:40]!r}")
+        dtype = np.dtype(name)
+        n = cls.count_params(**arch, bias=bias)
+        key = prefix + "theta"
+        if key not in data:
+            raise ModelFileError(f"{source}: missing field {key!r}")
+        shape, dt = _npz.declared(data, key)
+        if shape != (n,) or dt != dtype:
             raise ModelFileError(
-                f"{source}: parameter vector has shape {theta.shape} and dtype {theta.dtype}; "
-                f"the stored architecture needs ({net.n_params},) {net.dtype}")
-        if not np.all(np.isfinite(theta)):
-            raise ModelFileError(f"{source}: parameter vector contains non-finite values")
-        net.unpack(theta)
+                f"{source}: field {key!r} (the parameter vector) has shape {shape} and dtype "
+                f"{dt}; the stored architecture ({arch['width']} wide, {arch['depth']} blocks) "
+                f"needs ({n},) {dtype}")
+        net = cls.zeros(**arch, bias=bias, dtype=dtype)
+        if isinstance(data, _npz.NpzReader):
+            data.read_into(key, net._theta)
+        else:
+            net._theta[...] = data[key]
+        if not np.all(np.isfinite(net._theta)):
+            raise ModelFileError(f"{source}: field {key!r} contains non-finite values")
         return net
 
     def save(self, path) -> Path:
@@ -284,9 +329,13 @@ class ResidualMLP:
 
     @classmethod
     def load(cls, path) -> ResidualMLP:
-        """Read a network written by :meth:`save`; never unpickles."""
-        with load_npz(path) as data:
-            return cls.from_state(data, source=str(path))
+        """Read a network written by :meth:`save`; never unpickles (sizes are checked before
+        anything is allocated: sns_np/_npz.py)."""
+        try:
+            with load_npz(path) as data:
+                return cls.from_state(data, source=str(path))
+        except (RecursionError, MemoryError) as exc:   # a last line of defence: one line
+            raise ModelFileError(f"{path}: cannot be read ({type(exc).__name__})") from None
 
     # ------------------------------------------------------------------ forward jets
     def _check_x(self, x):
@@ -724,54 +773,3 @@ def save_npz(path, arrays: dict) -> Path:
             os.unlink(tmp)
         raise
     return path
-
-
-class load_npz:
-    """Context manager opening an .npz file with ``allow_pickle=False``.
-
-    Missing, unreadable or non-npz files raise :class:`ModelFileError` naming the file.
-    """
-
-    def __init__(self, path):
-        self.path = Path(path)
-
-    def __enter__(self):
-        if not self.path.is_file():
-            raise ModelFileError(f"model file {str(self.path)!r} does not exist")
-        if not zipfile.is_zipfile(self.path):
-            # np.load would try other formats (and blame pickles for a text file): say plainly
-            raise ModelFileError(f"{self.path}: not a readable .npz model file (not a zip archive)")
-        try:
-            self._data = np.load(self.path, allow_pickle=False)
-        except Exception as exc:  # zipfile.BadZipFile, OSError, ValueError, EOFError...
-            raise ModelFileError(f"{self.path}: not a readable .npz model file ({exc})") from None
-        if not hasattr(self._data, "files"):
-            raise ModelFileError(f"{self.path}: not an .npz archive (a single .npy array?)")
-        return _SafeNpz(self._data, str(self.path))
-
-    def __exit__(self, *exc):
-        self._data.close()
-        return False
-
-
-class _SafeNpz:
-    """Read access to an NpzFile that turns pickled (object) arrays into ModelFileError."""
-
-    def __init__(self, data, name):
-        self._data, self._name = data, name
-
-    def __contains__(self, key):
-        return key in self._data.files
-
-    def __getitem__(self, key):
-        try:
-            return self._data[key]
-        except ValueError as exc:  # "Object arrays cannot be loaded when allow_pickle=False"
-            raise ModelFileError(f"{self._name}: field {key!r} cannot be read safely ({exc})")\
-                from None
-        except Exception as exc:
-            raise ModelFileError(f"{self._name}: field {key!r} is corrupt ({exc})") from None
-
-    @property
-    def files(self):
-        return self._data.files

@@ -16,6 +16,7 @@ import json
 
 import numpy as np
 
+from .. import _npz
 from .._validation import as_points, check_order
 from ..errors import ModelFileError
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
@@ -157,24 +158,28 @@ class SphericalNeuralSurface:
 
     @classmethod
     def from_state(cls, data, source="state"):
+        """Rebuild a surface from :meth:`state` arrays (or an open file), checking every field;
+        any problem is a :class:`ModelFileError` naming ``source`` and the field."""
         if "format" not in data:
             raise ModelFileError(f"{source}: missing field 'format'; not an sns_np model file")
-        fmt = str(data["format"])
+        fmt = _npz.field(data, "format", source, kinds="U", what="text")
         if fmt != FORMAT:
             hint = " (a bare network: use ResidualMLP.load)" if fmt == "sns_np.ResidualMLP" else ""
-            raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}{hint}")
-        version = int(data["format_version"]) if "format_version" in data else -1
+            raise ModelFileError(f"{source}: format is {fmt[:80]!r}, expected {FORMAT!r}{hint}")
+        version = _npz.int_field(data, "format_version", source)
         if version != FORMAT_VERSION:
             raise ModelFileError(f"{source}: model format version {version} is not supported "
                                  f"(this sns_np reads version {FORMAT_VERSION})")
-        for key in ("center", "scale", "metadata"):
-            if key not in data:
-                raise ModelFileError(f"{source}: missing field {key!r}")
+        center = _npz.field(data, "center", source, kinds="fiu", shape=(3,), what="3 numbers")
+        scale = _npz.field(data, "scale", source, kinds="fiu", what="a number")
+        metadata = _npz.json_field(data, "metadata", source)
+        _check_metadata(metadata, source)
+        if "checkpoint.key" in data:
+            _check_checkpoint(data, source)
         net = ResidualMLP.from_state(data, prefix="net.", source=source)
         try:
-            metadata = json.loads(str(data["metadata"]))
-            return cls(net, center=np.asarray(data["center"], dtype=np.float64),
-                       scale=float(data["scale"]), metadata=metadata)
+            return cls(net, center=np.asarray(center, dtype=np.float64), scale=float(scale),
+                       metadata=metadata)
         except (ValueError, TypeError) as exc:
             raise ModelFileError(f"{source}: invalid transform or metadata ({exc})") from None
 
@@ -184,9 +189,78 @@ class SphericalNeuralSurface:
 
     @classmethod
     def load(cls, path) -> SphericalNeuralSurface:
-        """Read a model written by :meth:`save` (or a fit checkpoint); never unpickles."""
-        with load_npz(path) as data:
-            return cls.from_state(data, source=str(path))
+        """Read a model written by :meth:`save` (or a fit checkpoint); never unpickles.
+
+        The cost of refusing a crafted file is bounded (sns_np/_npz.py): sizes are checked
+        before anything is allocated. Every problem is a :class:`ModelFileError` naming the
+        file and the field.
+        """
+        try:
+            with load_npz(path) as data:
+                return cls.from_state(data, source=str(path))
+        except (RecursionError, MemoryError) as exc:   # a last line of defence: one line
+            raise ModelFileError(f"{path}: cannot be read ({type(exc).__name__})") from None
+
+
+#: fit-report entries that readers (``sns-np info``) format as numbers
+_FIT_NUMBERS = ("steps", "seconds", "position_mean", "position_relative", "normal_mean_deg")
+
+
+def _check_metadata(metadata, source):
+    """The metadata must be a JSON object; a ``fit`` block must hold its numbers as numbers."""
+    if not isinstance(metadata, dict):
+        raise ModelFileError(f"{source}: field 'metadata' must be a JSON object, got "
+                             f"{type(metadata).__name__}")
+    fit = metadata.get("fit")
+    if fit is None:
+        return
+    if not isinstance(fit, dict):
+        raise ModelFileError(f"{source}: field 'metadata.fit' must be a JSON object, got "
+                             f"{type(fit).__name__}")
+    for k in _FIT_NUMBERS:
+        v = fit.get(k)
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            raise ModelFileError(f"{source}: field 'metadata.fit.{k}' must be a number, got "
+                                 f"{type(v).__name__}")
+    for k in ("options", "history"):
+        if not isinstance(fit.get(k, {}), dict):
+            raise ModelFileError(f"{source}: field 'metadata.fit.{k}' must be a JSON object, "
+                                 f"got {type(fit[k]).__name__}")
+
+
+def _check_checkpoint(data, source):
+    """The fields that resuming a fit reads, checked before it reads them (a crafted random
+    generator state would otherwise surface as a TypeError deep inside NumPy)."""
+    _npz.field(data, "checkpoint.key", source, kinds="U", what="text")
+    _npz.int_field(data, "checkpoint.step", source, minimum=0)
+    seconds = _npz.field(data, "checkpoint.seconds", source, kinds="fiu", what="a number")
+    if not np.isfinite(seconds) or seconds < 0:
+        raise ModelFileError(f"{source}: field 'checkpoint.seconds' must be finite and >= 0")
+    state = _npz.json_field(data, "checkpoint.rng", source)
+    names = ("PCG64", "PCG64DXSM", "MT19937", "Philox", "SFC64")
+    name = state.get("bit_generator") if isinstance(state, dict) else None
+    if name not in names:
+        raise ModelFileError(f"{source}: field 'checkpoint.rng' is not a random generator "
+                             f"state (bit_generator must be one of {', '.join(names)})")
+    try:
+        getattr(np.random, name)().state = state
+    except Exception as exc:  # TypeError, ValueError, KeyError, OverflowError...
+        raise ModelFileError(f"{source}: field 'checkpoint.rng' is not a valid {name} state "
+                             f"({type(exc).__name__})") from None
+    if "opt.kind" in data:
+        _npz.field(data, "opt.kind", source, kinds="U", what="text")
+    if "opt.t" in data:
+        _npz.int_field(data, "opt.t", source, minimum=0)
+    n_theta = _npz.declared(data, "net.theta")[0] if "net.theta" in data else None
+    for k in (data.files if hasattr(data, "files") else list(data)):
+        if k.startswith("checkpoint.history.") or (
+                k.startswith("opt.") and k not in ("opt.kind", "opt.t")):
+            shape, dt = _npz.declared(data, k)
+            want = n_theta if k.startswith("opt.") else shape
+            if len(shape) != 1 or dt.kind not in "fiu" or shape != want:
+                raise ModelFileError(f"{source}: field {k!r} must be a vector of numbers"
+                                     + (f" of shape {want}" if k.startswith("opt.") else "")
+                                     + f", got {dt} of shape {shape}")
 
 
 def _json_default(obj):
