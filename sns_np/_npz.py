@@ -58,7 +58,9 @@ class load_npz:
             raise ModelFileError(f"model file {str(path)!r} does not exist")
         if not zipfile.is_zipfile(path):
             # np.load would try other formats (and blame pickles for a text file): say plainly
-            if path.read_bytes()[:6] == b"\x93NUMPY":
+            with open(path, "rb") as fh:
+                magic = fh.read(6)
+            if magic == b"\x93NUMPY":
                 raise ModelFileError(f"{path}: not an .npz archive (a single .npy array?)")
             raise ModelFileError(f"{path}: not a readable .npz model file (not a zip archive)")
         try:

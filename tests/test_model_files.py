@@ -359,3 +359,13 @@ def test_generated_byte_damage_fails_cleanly(tmp_path, cut, flips, junk):
     path = tmp_path / "damaged.npz"
     path.write_bytes(bytes(raw))
     _assert_load_is_clean(path)
+
+
+def test_files_that_are_not_archives(tmp_path):
+    single = tmp_path / "single.npz"
+    with open(single, "wb") as fh:
+        np.save(fh, np.zeros(3))
+    _refused(single, "a single .npy array?")
+    text = tmp_path / "text.npz"
+    text.write_text("v 0 0 0\n")
+    _refused(text, "not a zip archive")
