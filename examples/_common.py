@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -49,21 +48,15 @@ def output_dir(path) -> Path:
 def write_atomically(path, write):
     """Call ``write(tmp)`` on a temporary file next to ``path``, then rename it onto ``path``.
 
-    A failure (or Ctrl-C) half-way never leaves a truncated file under the final name.
+    A failure (or Ctrl-C) half-way never leaves a truncated file under the final name. The
+    package's own helper does the work: the file gets the permissions of the user's umask and
+    is flushed to disk before the rename.
     """
+    from sns_np._atomic import write_file
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp" + path.suffix,
-                               dir=path.parent)
-    os.close(fd)
-    try:
-        write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_file(path, write)
 
 
 def positive_int(text):

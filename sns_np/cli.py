@@ -127,26 +127,55 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("eval", help="evaluate a model on an icosphere and write a mesh",
                        description="Evaluate a fitted surface at the vertices of an icosphere "
-                       "and write the mesh with per-vertex normal, H, K, kmin, kmax and area "
-                       "element (PLY or VTU keep the fields; OBJ keeps geometry only).")
+                       "and write the mesh with per-vertex normal, H, K, kmin, kmax, area "
+                       "element and principal directions (PLY or VTU keep the fields; OBJ keeps "
+                       "geometry only). PLY stores each vector component as its own property "
+                       "(normal as nx, ny, nz; dmin as dmin_x, dmin_y, dmin_z); the names "
+                       "printed are the names written.")
     p.add_argument("model", help="fitted model (.npz)")
     p.add_argument("-o", "--output", required=True, help="output mesh (.ply, .vtu, .obj)")
-    p.add_argument("--level", type=int, default=6, help="icosphere level (6: 40,962 vertices)")
+    p.add_argument("--level", type=int, default=6,
+                   help="icosphere level, 0..8 (10 * 4^level + 2 vertices; 6: 40,962) "
+                        "(default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_eval)
 
-    p = sub.add_parser("info", help="describe a model file")
+    p = sub.add_parser("info", help="describe a model file",
+                       description="Print a model's architecture, output transform, metadata "
+                       "and fit report.")
     p.add_argument("model", help="fitted model (.npz)")
     p.set_defaults(func=_cmd_info)
 
     p = sub.add_parser("eigen", help="Laplace-Beltrami eigenmodes of a model",
                        description="Compute the lowest Laplace-Beltrami eigenvalues of a "
-                       "fitted surface and write the eigenfunctions as per-vertex fields.")
+                       "fitted surface and write the eigenfunctions as per-vertex fields. "
+                       "'ritz' (Rayleigh-Ritz in spherical harmonics of degree <= L) raises L "
+                       "until the eigenvalues settle, up to --max-degree; 'neural' trains one "
+                       "small network per mode (docs/spectral.md).")
     p.add_argument("model", help="fitted model (.npz)")
-    p.add_argument("-k", type=_positive_int, default=10, help="number of non-constant modes")
-    p.add_argument("-o", "--output", help="output mesh with the modes (.ply or .vtu)")
-    p.add_argument("--method", choices=["ritz", "neural"], default="ritz")
-    p.add_argument("--level", type=int, default=5, help="icosphere level of the output mesh")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-k", type=_positive_int, default=10,
+                   help="number of non-constant modes (default: %(default)s)")
+    p.add_argument("-o", "--output",
+                   help="output mesh with the modes (.ply or .vtu) (default: none, print the "
+                        "eigenvalues only)")
+    p.add_argument("--method", choices=["ritz", "neural"], default="ritz",
+                   help="eigensolver (default: %(default)s)")
+    p.add_argument("--degree", type=_positive_int, metavar="L",
+                   help="ritz: use harmonics of degree <= L, no automatic refinement "
+                        "((L+1)^2 basis functions) (default: automatic)")
+    p.add_argument("--max-degree", type=_positive_int, default=40, metavar="L_MAX",
+                   help="ritz: largest degree the automatic refinement tries; raise it when "
+                        "the eigenvalues have not converged (default: %(default)s)")
+    p.add_argument("--tol", type=_positive_float, default=1e-6,
+                   help="ritz: stop refining when the eigenvalues change by less than this "
+                        "(relative) from degree L-2 to L (default: %(default)s)")
+    p.add_argument("--steps", type=_positive_int,
+                   help="neural: optimisation steps per mode (default: 3000)")
+    p.add_argument("--level", type=int, default=5,
+                   help="icosphere level of the output mesh, 0..8 (default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="random seed of the neural method (default: %(default)s)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_eigen)
 
     p = sub.add_parser("heat", help="heat flow of a scalar field on a model",
@@ -248,15 +277,16 @@ def _input_scale_hint(report):
 
 
 def _cmd_eval(args):
-    from .mesh import write_mesh
+    from .mesh import write_mesh, written_field_names
     out = _check_output(args.output, (".ply", ".vtu", ".obj"))
     _check_level(args.level)
     S = _load_model(args.model)
     fields = out.suffix.lower() != ".obj"
-    V, F, data = S.to_mesh(args.level, fields=fields)
+    V, F, data = S.to_mesh(args.level, fields=fields, progress=not args.quiet)
     data.pop("sphere", None)
     write_mesh(out, V, F, data if fields else None)
-    print(f"wrote {out}: {len(V)} vertices" + (f", fields {', '.join(data)}" if fields else ""))
+    names = written_field_names(out, data) if fields else []
+    print(f"wrote {out}: {len(V)} vertices" + (f", fields {', '.join(names)}" if names else ""))
     return 0
 
 
@@ -291,19 +321,47 @@ def _printable(value):
 
 
 def _cmd_eigen(args):
-    from .mesh import write_mesh
+    import warnings
+
+    from .mesh import write_mesh, written_field_names
     from .spectral import eigenmodes, eigenmodes_on_mesh
     out = _check_output(args.output, (".ply", ".vtu")) if args.output else None
     _check_level(args.level)   # before the eigenmodes, not after
+    if args.method == "ritz":
+        if args.steps is not None:
+            raise ValueError("--steps applies to --method neural only")
+        opts = {"L": args.degree, "L_max": args.max_degree, "tol": args.tol}
+    else:
+        if args.degree is not None:
+            raise ValueError("--degree applies to --method ritz only")
+        opts = {} if args.steps is None else {"steps": args.steps}
     S = _load_model(args.model)
-    res = eigenmodes(S, args.k, method=args.method, rng=args.seed)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        try:
+            res = eigenmodes(S, args.k, method=args.method, rng=args.seed,
+                             progress=not args.quiet, **opts)
+        except ValueError as exc:   # "k modes need degree ... > L_max": name the options
+            raise ValueError(_cli_terms(str(exc))) from None
+    for w in caught:
+        print(f"sns-np eigen: warning: {_cli_terms(str(w.message))}", file=sys.stderr)
     for i, lam in enumerate(res.eigenvalues, start=1):
         print(f"lambda_{i} = {lam:.6g}")
     if out is not None:
         V, F, data = eigenmodes_on_mesh(res, S, args.level)
         write_mesh(out, V, F, data)
-        print(f"wrote {out}: {len(V)} vertices, fields {', '.join(data)}")
+        print(f"wrote {out}: {len(V)} vertices, fields "
+              f"{', '.join(written_field_names(out, data))}")
     return 0
+
+
+def _cli_terms(message):
+    """A library message with its keyword names replaced by the options of ``sns-np eigen``."""
+    return (message.replace("raise L_max or pass a larger L",
+                            "raise --max-degree or pass a larger --degree")
+            .replace("raise L_max", "raise --max-degree")
+            .replace("raise L or leave it None (automatic)",
+                     "raise --degree or leave it out (automatic)"))
 
 
 def _check_output_folder(path, level):

@@ -136,7 +136,8 @@ def test_info(files, capsys):
 def test_eval_writes_fields_in_the_model_units(files, tmp_path, capsys):
     import meshio
     out_path = tmp_path / "surface.ply"
-    code, out, err = run(["eval", files / "model.npz", "-o", out_path, "--level", 2], capsys)
+    code, out, err = run(["eval", files / "model.npz", "-o", out_path, "--level", 2, "--quiet"],
+                         capsys)
     assert code == 0 and err == ""                           # no meshio warnings either
     assert f"wrote {out_path}: 162 vertices" in out
     mesh = meshio.read(out_path)
@@ -218,8 +219,8 @@ def test_fit_interrupted_exits_130(files, tmp_path, capsys, monkeypatch):
 
 def test_eigen_writes_modes(files, tmp_path, capsys):
     out_path = tmp_path / "modes.ply"
-    code, out, err = run(["eigen", files / "model.npz", "-k", 3, "--level", 2, "-o", out_path],
-                         capsys)
+    code, out, err = run(["eigen", files / "model.npz", "-k", 3, "--level", 2, "-o", out_path,
+                          "--quiet"], capsys)
     assert code == 0 and err == ""
     lam = [float(line.split("=")[1]) for line in out.splitlines() if line.startswith("lambda_")]
     assert len(lam) == 3 and 0 < lam[0] <= lam[1] <= lam[2]

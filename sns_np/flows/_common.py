@@ -4,14 +4,11 @@ least-squares read-outs and atomic output folders."""
 from __future__ import annotations
 
 import math
-import os
-import shutil
-import tempfile
 import warnings
-from pathlib import Path
 
 import numpy as np
 
+from .._atomic import write_folder
 from .._validation import check_choice, check_positive_float
 from ..sampling import fibonacci_sphere
 
@@ -130,29 +127,7 @@ def atomic_folder(out, write, overwrite=False):
 
     ``write(tmp_path)`` fills the folder; on any error the temporary folder is removed, so
     ``out`` is either absent, untouched or complete. An existing non-empty ``out`` is refused
-    unless ``overwrite``.
+    unless ``overwrite``. Every file is fsynced before the rename, and the folder gets the
+    permissions of the user's umask (:func:`sns_np._atomic.write_folder`).
     """
-    out = Path(out)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir():
-        raise OSError(f"parent folder {str(parent)!r} of the output does not exist")
-    if out.exists() and not out.is_dir():
-        raise OSError(f"output {str(out)!r} exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not overwrite:
-        raise OSError(f"output folder {str(out)!r} exists and is not empty; remove it or "
-                      f"choose another")
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".tmp", dir=parent))
-    try:
-        write(tmp)
-        old = None
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-            os.rmdir(old)
-            os.rename(out, old)
-        os.rename(tmp, out)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return out
+    return write_folder(out, write, overwrite)

@@ -27,7 +27,7 @@ from .errors import (
     OrientationError,
     UnreferencedVertexError,
 )
-from .export import write_mesh
+from .export import write_mesh, written_field_names
 from .foldrepair import FoldRepair
 from .icosphere import icosphere
 from .io import LoadReport, MeshRepairWarning, load
@@ -53,7 +53,8 @@ from .stretch import minimise_stretch
 
 __all__ = [
     # input and checks
-    "load", "LoadReport", "MeshRepairWarning", "write_mesh", "check", "MeshSummary", "icosphere",
+    "load", "LoadReport", "MeshRepairWarning", "write_mesh", "written_field_names", "check",
+    "MeshSummary", "icosphere",
     # operators
     "face_areas", "face_normals", "face_angles", "vertex_normals", "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",

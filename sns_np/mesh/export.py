@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from .._atomic import write_file
 from ..errors import ShapeError
 
-__all__ = ["write_mesh", "WRITE_FORMATS"]
+__all__ = ["write_mesh", "written_field_names", "WRITE_FORMATS"]
 
 #: file extension -> meshio format name
 WRITE_FORMATS = {".ply": "ply", ".vtu": "vtu", ".obj": "obj", ".off": "off", ".stl": "stl"}
@@ -33,12 +32,26 @@ def write_mesh(path, V, F, point_data=None, binary=True):
         the geometry: passing fields to them raises, so nothing is silently dropped.
     binary : bool, PLY only
 
-    The file is written to a temporary name in the same folder and renamed into place, so an
-    error never leaves a half-written file.
+    The file is written to a temporary name in the same folder, flushed to disk and renamed
+    into place, so an error or a crash never leaves a half-written file; it gets the
+    permissions of any new file under the user's umask.
 
     Returns
     -------
     Path of the written file.
+
+    See Also
+    --------
+    written_field_names : the property names a file gets for given fields
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from sns_np.mesh import icosphere, write_mesh
+    >>> V, F = icosphere(1)
+    >>> out = os.path.join(tempfile.mkdtemp(), "sphere.ply")
+    >>> write_mesh(out, V, F, {"height": V[:, 2]}).name
+    'sphere.ply'
     """
     import meshio
 
@@ -62,30 +75,59 @@ def write_mesh(path, V, F, point_data=None, binary=True):
             raise ShapeError(f"point field {name!r} has shape {arr.shape}; expected ({len(V)},) "
                              f"or ({len(V)}, k)")
         if ext == ".ply" and arr.ndim == 2:
-            names = (["nx", "ny", "nz"] if name == "normal" and arr.shape[1] == 3 else
-                     [f"{name}_{c}" for c in "xyz"[:arr.shape[1]]] if arr.shape[1] <= 3 else
-                     [f"{name}_{i}" for i in range(arr.shape[1])])
-            for i, nm in enumerate(names):
+            for i, nm in enumerate(_property_names(ext, name, arr.shape)):
                 data[nm] = np.ascontiguousarray(arr[:, i])
         else:
             data[name] = arr
     if data and ext not in FIELD_FORMATS:
         raise ValueError(f"{ext} files cannot store per-vertex fields ({', '.join(data)}); "
                          f"write .ply or .vtu, or pass no fields")
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise OSError(f"directory {str(directory)!r} does not exist")
     # meshio warns on stderr when it casts int64 faces down for PLY; PLY takes int32 anyway
     cells = F.astype(np.int32 if ext == ".ply" and len(V) < 2**31 else np.int64)
     mesh = meshio.Mesh(V, [("triangle", cells)], point_data=data)
-    fd, tmp = tempfile.mkstemp(prefix=path.stem + ".", suffix=".tmp" + ext, dir=directory)
-    os.close(fd)
-    try:
-        kwargs = {"binary": binary} if ext == ".ply" else {}
-        meshio.write(tmp, mesh, file_format=WRITE_FORMATS[ext], **kwargs)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    kwargs = {"binary": binary} if ext == ".ply" else {}
+    # a temporary file with the umask's permissions, fsynced, then renamed (sns_np/_atomic.py)
+    return write_file(path, lambda tmp: meshio.write(tmp, mesh, file_format=WRITE_FORMATS[ext],
+                                                     **kwargs))
+
+
+def _property_names(ext, name, shape):
+    """The names under which a field of this shape is stored in a file of extension ext."""
+    if ext != ".ply" or len(shape) == 1:
+        return [name]
+    k = shape[1]
+    if name == "normal" and k == 3:
+        return ["nx", "ny", "nz"]
+    return [f"{name}_{c}" for c in "xyz"[:k]] if k <= 3 else [f"{name}_{i}" for i in range(k)]
+
+
+def written_field_names(path, point_data) -> list:
+    """The per-vertex property names that :func:`write_mesh` writes for ``point_data``.
+
+    PLY has scalar properties only, so vector fields are split (``normal`` into ``nx, ny,
+    nz``, any other ``v`` into ``v_x, v_y, v_z``); VTU keeps each field under its own name;
+    OBJ, OFF and STL keep none.
+
+    Parameters
+    ----------
+    path : str or Path, the output file (only its extension matters)
+    point_data : dict name -> (n,) or (n, k) array
+
+    Returns
+    -------
+    list of str, in the order they are written
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> fields = {"normal": np.zeros((4, 3)), "H": np.zeros(4), "dmin": np.zeros((4, 3))}
+    >>> written_field_names("out.ply", fields)
+    ['nx', 'ny', 'nz', 'H', 'dmin_x', 'dmin_y', 'dmin_z']
+    >>> written_field_names("out.vtu", fields)
+    ['normal', 'H', 'dmin']
+    """
+    ext = Path(path).suffix.lower()
+    if ext not in FIELD_FORMATS:
+        return []
+    return [nm for name, arr in (point_data or {}).items()
+            for nm in _property_names(ext, name, np.shape(arr))]

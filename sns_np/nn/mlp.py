@@ -26,14 +26,13 @@ All parameters live in one flat vector ``theta``; the weight matrices are views 
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 import threading
 from pathlib import Path
 
 import numpy as np
 
 from .. import _npz
+from .._atomic import write_file
 from .._npz import load_npz
 from .._validation import (
     as_float_array,
@@ -756,20 +755,14 @@ def _unpack_streams(Y, order, m, k):
 # ---------------------------------------------------------------------------------------------
 
 def save_npz(path, arrays: dict) -> Path:
-    """Write ``arrays`` to ``path`` (.npz) through a temporary file and an atomic rename."""
+    """Write ``arrays`` to ``path`` (.npz) through a temporary file, fsync and an atomic rename."""
     path = Path(path)
     if path.suffix != ".npz":
         raise ValueError(f"model files must end in .npz, got {path.name!r}")
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise OSError(f"directory {str(directory)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=directory)
-    try:
-        with os.fdopen(fd, "wb") as fh:
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+
+    # umask permissions, fsync before the rename (sns_np/_atomic.py)
+    return write_file(path, write)

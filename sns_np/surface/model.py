@@ -119,13 +119,14 @@ class SphericalNeuralSurface:
         return fit_sdf(sdf, **options)
 
     # ------------------------------------------------------------------ output
-    def to_mesh(self, level: int = 5, fields: bool = True):
+    def to_mesh(self, level: int = 5, fields: bool = True, progress: bool = False):
         """Evaluate the surface on an icosphere.
 
         Parameters
         ----------
         level : int, icosphere subdivision level (level 5: 10,242 vertices; 6: 40,962)
         fields : bool, also compute per-vertex differential quantities
+        progress : bool, show a progress bar on stderr (the vertices in chunks)
 
         Returns
         -------
@@ -134,17 +135,37 @@ class SphericalNeuralSurface:
         data : dict of per-vertex arrays: ``sphere`` (n, 3) and, with ``fields``, ``normal``
             (n, 3), ``H``, ``K``, ``kmin``, ``kmax``, ``area_element`` (n,), ``dmin``, ``dmax``
             (n, 3)
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0))
+        >>> V, F, data = S.to_mesh(level=1)
+        >>> V.shape, F.shape, sorted(data)[:4]
+        ((42, 3), (80, 3), ['H', 'K', 'area_element', 'dmax'])
         """
+        from .._progress import Progress
         from ..mesh import icosphere
         P, F = icosphere(level)
         data = {"sphere": P}
         if not fields:
             return self.jet(P, 0), F, data
         from ..geometry import differential_quantities
-        dq = differential_quantities(self, P, on_degenerate="nan")
-        data.update(normal=dq.n, H=dq.H, K=dq.K, kmin=dq.kmin, kmax=dq.kmax,
-                    area_element=dq.area_element, dmin=dq.dmin, dmax=dq.dmax)
-        return dq.x, F, data
+        names = ("normal", "H", "K", "kmin", "kmax", "area_element", "dmin", "dmax")
+        attrs = ("n", "H", "K", "kmin", "kmax", "area_element", "dmin", "dmax")
+        parts = {name: [] for name in ("x",) + names}
+        step = 8192
+        bar = Progress(len(P), "eval", enabled=progress)
+        for lo in range(0, len(P), step):
+            dq = differential_quantities(self, P[lo:lo + step], on_degenerate="nan")
+            parts["x"].append(dq.x)
+            for name, attr in zip(names, attrs):
+                parts[name].append(getattr(dq, attr))
+            if lo + step < len(P):
+                bar.update(lo + step)
+        bar.close(len(P))
+        data.update({name: np.concatenate(parts[name]) for name in names})
+        return np.concatenate(parts["x"]), F, data
 
     # ------------------------------------------------------------------ files
     def state(self) -> dict:
