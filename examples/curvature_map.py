@@ -12,11 +12,15 @@ figure has three panels:
 Colour limits are the 2nd and 98th percentiles, so a few extreme values (at sharp features, or
 on a barely trained surface) do not wash out the rest.
 
-Run (from the project root), after examples/fit_mesh.py:
+Run (from the project root):
 
-    python examples/curvature_map.py                       # sns_np_examples_out/ellipsoid.npz
+    python examples/curvature_map.py                       # a built-in surface, see below
     python examples/curvature_map.py sns_np_examples_out/spot_triangulated.npz --level 6
     python examples/curvature_map.py --help
+
+With no model named, it uses OUT_DIR/ellipsoid.npz when examples/fit_mesh.py has written it;
+otherwise it fits a small network (64 x 2, 400 steps: a few seconds) to the built-in ellipsoid
+(semi-axes 1, 1.3, 0.7) by itself, saves it as OUT_DIR/ellipsoid_small.npz and renders that.
 
 Output: OUT_DIR/<model name>_curvature.png (OUT_DIR defaults to ./sns_np_examples_out).
 """
@@ -29,7 +33,26 @@ import numpy as np
 from _common import DEFAULT_OUT_DIR, SMOKE, clear_errors, output_dir, positive_int, write_atomically
 
 from sns_np.geometry import differential_quantities
-from sns_np.surface import SphericalNeuralSurface
+from sns_np.shapes import Ellipsoid
+from sns_np.surface import SphericalNeuralSurface, fit_shape
+
+#: the built-in surface's fit: small enough for seconds, accurate to a fraction of a degree
+SMALL_FIT = dict(width=32, depth=2, steps=50, batch=512) if SMOKE else \
+    dict(width=64, depth=2, steps=400, batch=1024)
+
+
+def builtin_surface(out_dir):
+    """Fit the built-in ellipsoid with a small network, save it, return (surface, path)."""
+    path = out_dir / "ellipsoid_small.npz"
+    print(f"no model given and no {out_dir / 'ellipsoid.npz'}: fitting a small network "
+          f"({SMALL_FIT['width']} x {SMALL_FIT['depth']}, {SMALL_FIT['steps']} steps) to the "
+          f"built-in ellipsoid (1, 1.3, 0.7)")
+    surface, report = fit_shape(Ellipsoid(1.0, 1.3, 0.7), seed=0, progress=False, **SMALL_FIT)
+    print(report.summary())
+    out_dir.mkdir(parents=True, exist_ok=True)
+    surface.save(path)
+    print(f"saved {path}")
+    return surface, path
 
 
 def equirectangular_points(width):
@@ -102,7 +125,8 @@ def main(argv=None):
         formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("model", nargs="?", default=None,
                         help="fitted model (.npz); default: OUT_DIR/ellipsoid.npz, written by "
-                             "examples/fit_mesh.py")
+                             "examples/fit_mesh.py, or else a small fit of the built-in "
+                             "ellipsoid made on the spot")
     parser.add_argument("--out-dir", default=DEFAULT_OUT_DIR, help="output folder (%(default)s)")
     parser.add_argument("--level", type=int, default=3 if SMOKE else 5,
                         help="icosphere level of the 3-D view, 0..7 (%(default)s)")
@@ -116,9 +140,9 @@ def main(argv=None):
         out_dir = output_dir(args.out_dir)
         model = Path(args.model) if args.model else out_dir / "ellipsoid.npz"
         if args.model is None and not model.exists():
-            raise ValueError(f"no model at {model}; run examples/fit_mesh.py first or name "
-                             "a model file")
-        surface = SphericalNeuralSurface.load(model)        # names the problem if it fails
+            surface, model = builtin_surface(out_dir)
+        else:
+            surface = SphericalNeuralSurface.load(model)    # names the problem if it fails
         path = out_dir / f"{model.stem}_curvature.png"
         dq = render(surface, args.level, args.map_width, path)
         print(f"{model}: mean curvature H in [{np.nanmin(dq.H):.4g}, {np.nanmax(dq.H):.4g}], "

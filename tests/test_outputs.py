@@ -234,3 +234,24 @@ def test_every_option_has_help_and_shows_its_default(command, capsys):
     text = capsys.readouterr().out
     if command == "eigen":
         assert "--max-degree L_MAX" in text and "(default: 40)" in text
+
+
+# ------------------------------------------------------------------------------ examples
+
+def test_curvature_map_example_runs_with_no_argument(tmp_path):
+    """The README promises it: no model named and none fitted yet, it fits a small built-in
+    surface by itself (smoke budget here; the default run takes seconds)."""
+    import subprocess
+    from pathlib import Path
+    pytest.importorskip("matplotlib")
+    script = Path(__file__).resolve().parents[1] / "examples" / "curvature_map.py"
+    if not script.is_file():
+        pytest.skip("examples/ not present")
+    env = dict(os.environ, SNS_NP_SMOKE="1", MPLBACKEND="Agg")
+    proc = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = tmp_path / "sns_np_examples_out"
+    assert (out / "ellipsoid_small.npz").is_file()
+    assert (out / "ellipsoid_small_curvature.png").stat().st_size > 10_000
+    assert "fitting a small network" in proc.stdout
