@@ -39,7 +39,15 @@ __all__ = [
 
 
 def offers_directions(obj) -> bool:
-    """True if ``obj.jet`` accepts ``directions=`` (and ``second=``) keyword arguments."""
+    """True if ``obj.jet`` accepts ``directions=`` (and ``second=``) keyword arguments.
+
+    Examples
+    --------
+    >>> from sns_np.nn import ResidualMLP
+    >>> from sns_np.shapes import Sphere
+    >>> offers_directions(ResidualMLP(width=4, depth=1)), offers_directions(Sphere())
+    (True, False)
+    """
     jet = getattr(obj, "jet", None)
     if jet is None:
         return False
@@ -51,7 +59,13 @@ def offers_directions(obj) -> bool:
 
 
 def chunk_slices(n: int, chunk: int):
-    """Yield slices covering ``range(n)`` in blocks of at most ``chunk``."""
+    """Yield slices covering ``range(n)`` in blocks of at most ``chunk``.
+
+    Examples
+    --------
+    >>> list(chunk_slices(5, 2))
+    [slice(0, 2, None), slice(2, 4, None), slice(4, 5, None)]
+    """
     chunk = max(int(chunk), 1)
     for start in range(0, n, chunk):
         yield slice(start, min(start + chunk, n))
@@ -93,6 +107,20 @@ def surface_jet(surface, p: np.ndarray, order: int):
     Returns
     -------
     y or (y, J) or (y, J, D2) as in the surface-map protocol, as float64 arrays.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> y, J = surface_jet(Sphere(2.0), np.array([[0.0, 0.0, 1.0]]), 1)
+    >>> y, J.shape
+    (array([[0., 0., 2.]]), (1, 3, 3))
+    >>> class Broken:
+    ...     def jet(self, p, order=0):
+    ...         return np.zeros((len(p), 2))
+    >>> surface_jet(Broken(), np.zeros((4, 3)), 0)
+    Traceback (most recent call last):
+        ...
+    sns_np.errors.ShapeError: Broken.jet returned y of shape (4, 2); expected (4, 3)
     """
     _require_jet(surface, "surface")
     order = check_order(order)
@@ -133,6 +161,16 @@ def directional_jet(surface, p: np.ndarray, order: int, D: np.ndarray, second: i
     Returns
     -------
     (y, JD) or (y, JD, D2D) with shapes (n, 3), (n, 3, m), (n, 3, k, k).
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Ellipsoid
+    >>> from sns_np.geometry import tangent_frame
+    >>> p = np.array([[0.0, 0.0, 1.0]])
+    >>> D = np.concatenate([tangent_frame(p), p[:, :, None]], axis=2)   # [e_u, e_v, p]
+    >>> y, JD, D2D = directional_jet(Ellipsoid(1.0, 2.0, 3.0), p, 2, D, second=2)
+    >>> JD.shape, D2D.shape
+    ((1, 3, 3), (1, 3, 2, 2))
     """
     order = check_order(order, (1, 2))
     n = p.shape[0]
@@ -169,7 +207,15 @@ def directional_jet(surface, p: np.ndarray, order: int, D: np.ndarray, second: i
 
 
 def field_jet(field, p: np.ndarray, order: int):
-    """Call ``field.jet(p, order)`` and validate: value (n,), gradient (n, 3), Hessian (n, 3, 3)."""
+    """Call ``field.jet(p, order)`` and validate: value (n,), gradient (n, 3), Hessian (n, 3, 3).
+
+    Examples
+    --------
+    >>> from sns_np.shapes import SphericalHarmonic
+    >>> v, g = field_jet(SphericalHarmonic(1, 0), np.array([[0.0, 0.0, 1.0]]), 1)
+    >>> round(float(v[0]), 6), g.shape
+    (0.488603, (1, 3))
+    """
     _require_jet(field, "field")
     order = check_order(order)
     n = p.shape[0]

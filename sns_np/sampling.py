@@ -204,6 +204,17 @@ class SurfaceSample:
         it comes from all proposals)
     area_stderr : float, its standard error (NaN for "quadrature")
     n_proposed : int, sphere points evaluated to build the sample
+
+    Examples
+    --------
+    >>> from sns_np.sampling import surface_sample
+    >>> from sns_np.shapes import Sphere
+    >>> s = surface_sample(Sphere(2.0), 2000, method="mc", rng=0)
+    >>> s.p.shape, s.R.shape, s.Iinv.shape
+    ((2000, 3), (2000, 3, 2), (2000, 2, 2))
+    >>> area = s.integral(np.ones(len(s)))             # 4 pi r^2 = 50.27
+    >>> bool(abs(area.value - 16 * np.pi) < 1e-9)      # exact: a sphere's area element is constant
+    True
     """
 
     p: np.ndarray
@@ -221,7 +232,17 @@ class SurfaceSample:
         return self.p.shape[0]
 
     def subset(self, idx) -> SurfaceSample:
-        """A sub-sample (a training mini-batch); weights rescaled so sums stay unbiased."""
+        """A sub-sample (a training mini-batch); weights rescaled so sums stay unbiased.
+
+        Examples
+        --------
+        >>> from sns_np.sampling import surface_sample
+        >>> from sns_np.shapes import Ellipsoid
+        >>> s = surface_sample(Ellipsoid(1.0, 2.0, 3.0), 1000, rng=0)
+        >>> batch = s.subset(np.arange(100))
+        >>> len(batch), bool(np.isclose(batch.weights.sum(), s.weights[:100].sum() * 10))
+        (100, True)
+        """
         idx = np.asarray(idx)
         m = self.p[idx].shape[0]
         if m == 0:
@@ -233,7 +254,19 @@ class SurfaceSample:
 
     # -------------------------------------------------------------- integrands
     def values(self, field, domain: str = "sphere") -> np.ndarray:
-        """``g(p_i)`` (n,) of a field (protocol object) or of a callable ``f(p) -> (n,)``."""
+        """``g(p_i)`` (n,) of a field (protocol object) or of a callable ``f(p) -> (n,)``.
+
+        Examples
+        --------
+        >>> from sns_np.sampling import surface_sample
+        >>> from sns_np.shapes import Sphere, SphericalHarmonic
+        >>> s = surface_sample(Sphere(), 4, rng=0)
+        >>> Y10 = np.sqrt(3 / (4 * np.pi)) * s.p[:, 2]
+        >>> bool(np.allclose(s.values(SphericalHarmonic(1, 0)), Y10))
+        True
+        >>> bool(np.allclose(s.values(lambda p: p[:, 0]), s.p[:, 0]))     # a plain callable too
+        True
+        """
         return _field(field, self, domain, 0)
 
     def dirichlet_density(self, field, domain: str = "sphere"):
@@ -242,6 +275,15 @@ class SurfaceSample:
         The surface gradient of ``h(S(p)) = g(p)`` is ``J R I^-1 R^T grad g`` (paper Eq. 24,
         ``grad h = (J^T)^-1 grad g`` restricted to the tangent plane), so its squared length
         needs only the precomputed ``R`` and ``I^-1``.
+
+        Examples
+        --------
+        >>> from sns_np.sampling import surface_sample
+        >>> from sns_np.shapes import Sphere, SphericalHarmonic
+        >>> s = surface_sample(Sphere(), 800, method="quadrature")
+        >>> d, g = s.dirichlet_density(SphericalHarmonic(1, 1))
+        >>> round(s.integral(d).value, 6)          # int |grad Y_1|^2 = l(l+1) int Y^2 = 2
+        2.0
         """
         g, grad = _field(field, self, domain, 1)
         G = np.einsum("kab,ka->kb", self.R, grad)
@@ -249,7 +291,17 @@ class SurfaceSample:
 
     # -------------------------------------------------------------- estimators
     def integral(self, values) -> Estimate:
-        """``integral over S of h dA`` from values ``g(p_i)`` (n,), with its standard error."""
+        """``integral over S of h dA`` from values ``g(p_i)`` (n,), with its standard error.
+
+        Examples
+        --------
+        >>> from sns_np.sampling import surface_sample
+        >>> from sns_np.shapes import Ellipsoid
+        >>> s = surface_sample(Ellipsoid(1.0, 2.0, 3.0), 20000, rng=0)
+        >>> est = s.integral(np.ones(len(s)))                     # the area, 48.88
+        >>> round(est.value, 1), bool(abs(est.value - 48.88) < 4 * est.stderr)
+        (48.8, True)
+        """
         f = self._check(values, "values")
         value = float(self.weights @ f)
         if self.kind == "quadrature":
@@ -268,6 +320,15 @@ class SurfaceSample:
 
         ``se = std(t_a - r t_b) / (sqrt(n) mean(t_b))`` for the i.i.d. terms ``t = n w f``;
         the uncertainty of the area cancels.
+
+        Examples
+        --------
+        >>> from sns_np.sampling import surface_sample
+        >>> from sns_np.shapes import Sphere
+        >>> s = surface_sample(Sphere(), 400, method="quadrature")
+        >>> z2 = s.p[:, 2] ** 2
+        >>> round(s.ratio(z2, np.ones(len(s))).value, 6)           # mean of z^2 on the sphere: 1/3
+        0.333333
         """
         a = self._check(numerator, "numerator")
         b = self._check(denominator, "denominator")

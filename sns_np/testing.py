@@ -29,7 +29,13 @@ __all__ = ["relative_error", "central_difference", "check_jet", "check_direction
 
 
 def relative_error(analytic, numeric, floor: float = 1e-12) -> float:
-    """max |analytic - numeric| / max(max |numeric|, floor)."""
+    """max |analytic - numeric| / max(max |numeric|, floor).
+
+    Examples
+    --------
+    >>> round(relative_error(np.array([1.0, 2.0]), np.array([1.0, 2.002])), 6)   # 0.002 / 2.002
+    0.000999
+    """
     a = np.asarray(analytic, dtype=np.float64)
     b = np.asarray(numeric, dtype=np.float64)
     if a.shape != b.shape:
@@ -46,6 +52,13 @@ def central_difference(f: Callable, x: np.ndarray, v: np.ndarray, h: float,
 
     ``f`` maps an array shaped like ``x`` to an array (or tuple of arrays); ``v`` has the shape
     of ``x``. Returns the difference quotient with the structure of ``f(x)``.
+
+    Examples
+    --------
+    >>> x = np.array([0.5])
+    >>> d = central_difference(np.sin, x, np.ones(1), 1e-4, richardson=True)
+    >>> bool(abs(d[0] - np.cos(0.5)) < 1e-12)
+    True
     """
 
     def quotient(step):
@@ -88,6 +101,14 @@ def check_jet(obj, x, order: int = 2, h: float = 1e-5, richardson: bool = False)
     Returns
     -------
     dict with keys ``"J"`` and (order 2) ``"D2"``, ``"D2_symmetry"``: relative errors.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Ellipsoid
+    >>> p = np.array([[0.6, 0.0, 0.8], [0.0, 1.0, 0.0]])
+    >>> err = check_jet(Ellipsoid(1.0, 2.0, 3.0), p, order=2)
+    >>> sorted(err), bool(err["J"] < 1e-8)
+    (['D2', 'D2_symmetry', 'J'], True)
     """
     x = np.asarray(x, dtype=np.float64)
     n, dim = x.shape
@@ -119,6 +140,16 @@ def check_directional_jet(obj, x, D, order: int = 2, second: int | None = None,
 
     Returns relative errors ``"JD_vs_full"``, ``"JD_vs_fd"`` and (order 2) ``"D2D_vs_full"``,
     ``"D2D_vs_fd"``.
+
+    Examples
+    --------
+    >>> from sns_np.nn import ResidualMLP
+    >>> net = ResidualMLP(width=8, depth=1, seed=0)
+    >>> x = np.array([[0.6, 0.0, 0.8]])
+    >>> D = np.random.default_rng(0).standard_normal((1, 3, 3))
+    >>> err = check_directional_jet(net, x, D, order=2, second=2)
+    >>> bool(max(err.values()) < 1e-6)
+    True
     """
     x = np.asarray(x, dtype=np.float64)
     D = np.asarray(D, dtype=np.float64)
@@ -161,6 +192,15 @@ def check_gradient(fun: Callable, theta, h: float = 1e-6, n_directions: int | No
     -------
     float
         The relative error over all compared derivatives.
+
+    Examples
+    --------
+    >>> A = np.array([[2.0, 1.0], [1.0, 3.0]])
+    >>> fun = lambda t: (0.5 * t @ A @ t, A @ t)          # loss and its gradient
+    >>> bool(check_gradient(fun, np.array([1.0, -1.0])) < 1e-8)
+    True
+    >>> bool(check_gradient(fun, np.array([1.0, -1.0]), n_directions=4, rng=0) < 1e-8)
+    True
     """
     theta = np.asarray(theta, dtype=np.float64).copy()
     _, g = fun(theta)

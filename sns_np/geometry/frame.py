@@ -16,6 +16,15 @@ def sphere_points(p, tol: float = SPHERE_TOL) -> np.ndarray:
     the sphere (by at most ``tol``) so that the chart and the surface point agree exactly.
     Raises :class:`~sns_np.errors.ShapeError` for points farther off, wrong shapes or
     non-finite values.
+
+    Examples
+    --------
+    >>> sphere_points(np.array([[0.0, 0.0, 1.0 + 1e-12]]))   # projected back onto the sphere
+    array([[0., 0., 1.]])
+    >>> sphere_points(np.array([[0.0, 0.0, 2.0]]))
+    Traceback (most recent call last):
+        ...
+    sns_np.errors.ShapeError: p must lie on the unit sphere ...
     """
     p = as_sphere_points(p, "p", tol=tol)
     return p / np.linalg.norm(p, axis=1, keepdims=True)

@@ -52,6 +52,18 @@ class DifferentialQuantities:
     area_element : (n,) ``sqrt(det I)``, surface area per unit sphere area
     valid : (n,) bool; False only with ``on_degenerate="nan"``, where every derived quantity
         (all but ``x``) is NaN
+
+    Examples
+    --------
+    >>> from sns_np.geometry import differential_quantities
+    >>> from sns_np.shapes import Ellipsoid
+    >>> q = differential_quantities(Ellipsoid(1.0, 2.0, 3.0), np.array([[0.0, 0.0, 1.0]]))
+    >>> q.x, q.n                                          # the top point and its normal
+    (array([[0., 0., 3.]]), array([[0., 0., 1.]]))
+    >>> float(q.K[0]), float(q.kmin[0]), float(q.kmax[0])   # kmin = c/b^2, kmax = c/a^2
+    (2.25, 0.75, 3.0)
+    >>> bool(np.allclose(q.H, (q.kmin + q.kmax) / 2))
+    True
     """
 
     x: np.ndarray

@@ -29,13 +29,25 @@ __all__ = ["softplus", "sigmoid", "softplus_derivatives", "ACTIVATIONS"]
 
 
 def softplus(z):
-    """s(z) = log(1 + e^z), overflow-free."""
+    """s(z) = log(1 + e^z), overflow-free.
+
+    Examples
+    --------
+    >>> softplus(np.array([-800.0, 0.0, 800.0]))                   # no overflow
+    array([0.00000000e+00, 6.93147181e-01, 8.00000000e+02])
+    """
     z = np.asarray(z)
     return np.maximum(z, 0) + np.log1p(np.exp(-np.abs(z)))
 
 
 def sigmoid(z):
-    """s'(z) = 1 / (1 + e^-z), overflow-free."""
+    """s'(z) = 1 / (1 + e^-z), overflow-free.
+
+    Examples
+    --------
+    >>> sigmoid(np.array([-800.0, 0.0, 800.0]))
+    array([0. , 0.5, 1. ])
+    """
     z = np.asarray(z)
     e = np.exp(-np.abs(z))
     return np.where(z >= 0, 1.0, e) / (1.0 + e)

@@ -61,7 +61,13 @@ _ROWS_PER_CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
 
 
 def n_streams(m: int, k: int) -> int:
-    """Number of streams: the value, m first-order and k (k + 1) / 2 second-order ones."""
+    """Number of streams: the value, m first-order and k (k + 1) / 2 second-order ones.
+
+    Examples
+    --------
+    >>> n_streams(3, 0), n_streams(3, 3), n_streams(3, 2)         # value+J, +D2, geometry's 7
+    (4, 10, 7)
+    """
     return 1 + m + k * (k + 1) // 2
 
 
@@ -167,6 +173,13 @@ class ResidualMLP:
 
         ``w d + 2 L w^2 + o w`` plus ``w + 2 L w + o`` biases (d = in_dim, o = out_dim,
         w = width, L = depth); for the reference network (3, 3, 256, 8): 1,050,112.
+
+        Examples
+        --------
+        >>> ResidualMLP.count_params(3, 3, 256, 8)       # the reference surface network
+        1050112
+        >>> ResidualMLP.count_params(3, 3, 10, 2, bias=True)
+        513
         """
         d, o, w, L = (int(v) for v in (in_dim, out_dim, width, depth))
         n = w * d + 2 * L * w * w + o * w
@@ -196,11 +209,29 @@ class ResidualMLP:
             setattr(self, name, buf[lo:hi].reshape(shape))
 
     def param_slices(self) -> dict:
-        """Name -> (slice into theta, shape) for every parameter array."""
+        """Name -> (slice into theta, shape) for every parameter array.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> sl, shape = net.param_slices()["W1"]
+        >>> shape, net.pack()[sl].reshape(shape).shape
+        ((1, 4, 4), (1, 4, 4))
+        """
         return {name: (slice(*self._offsets[name]), self._shapes[name]) for name in self._shapes}
 
     def initialize(self, seed=None):
-        """Draw fresh parameters (see the class Notes for the scheme)."""
+        """Draw fresh parameters (see the class Notes for the scheme).
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> theta = net.pack()
+        >>> bool(np.array_equal(net.initialize(seed=0).pack(), theta))   # same seed, same draw
+        True
+        >>> bool(np.array_equal(net.initialize(seed=1).pack(), theta))
+        False
+        """
         g = as_generator(seed)
         w, d, L = self.width, self.in_dim, self.depth
         self.W0[...] = g.standard_normal(self.W0.shape) * (self.input_scale / np.sqrt(d))
@@ -212,7 +243,15 @@ class ResidualMLP:
         return self
 
     def pack(self) -> np.ndarray:
-        """A copy of all parameters as one flat vector (n_params,) in the network's dtype."""
+        """A copy of all parameters as one flat vector (n_params,) in the network's dtype.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> theta = net.pack()
+        >>> theta.shape == (net.n_params,), theta is net.theta      # a copy, not the live buffer
+        (True, False)
+        """
         return self._theta.copy()
 
     def unpack(self, theta) -> ResidualMLP:
@@ -220,6 +259,13 @@ class ResidualMLP:
 
         The weight arrays (``W0``, ``W1``, ...) stay views of one internal buffer, so existing
         references to them see the new values.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> net.unpack(np.zeros(net.n_params))(np.ones((2, 3)))   # all-zero parameters: y = 0
+        array([[0., 0., 0.],
+               [0., 0., 0.]])
         """
         arr = np.asarray(theta)
         if arr.dtype == object or np.iscomplexobj(arr) or not (
@@ -238,7 +284,16 @@ class ResidualMLP:
         return self._theta
 
     def copy(self) -> ResidualMLP:
-        """An independent network with the same architecture and parameters."""
+        """An independent network with the same architecture and parameters.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> twin = net.copy()
+        >>> twin.theta[:] = 0.0
+        >>> bool(np.any(net.theta != 0.0))                            # the original is untouched
+        True
+        """
         new = ResidualMLP.zeros(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
                                 dtype=self.dtype, chunk_size=self.chunk_size)
         new._theta[...] = self._theta
@@ -246,7 +301,14 @@ class ResidualMLP:
         return new
 
     def astype(self, dtype) -> ResidualMLP:
-        """The same network with parameters converted to ``dtype``."""
+        """The same network with parameters converted to ``dtype``.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0).astype(np.float32)
+        >>> net.dtype, net(np.ones((1, 3), np.float32)).dtype
+        (dtype('float32'), dtype('float32'))
+        """
         new = ResidualMLP.zeros(self.in_dim, self.out_dim, self.width, self.depth, self.bias,
                                 dtype=dtype, chunk_size=self.chunk_size)
         new.unpack(self._theta.astype(dtype))
@@ -254,6 +316,13 @@ class ResidualMLP:
         return new
 
     def architecture(self) -> dict:
+        """The architecture as a dict: ``in_dim``, ``out_dim``, ``width``, ``depth``, ``bias``.
+
+        Examples
+        --------
+        >>> ResidualMLP(width=16, depth=2).architecture()
+        {'in_dim': 3, 'out_dim': 3, 'width': 16, 'depth': 2, 'bias': False}
+        """
         return dict(in_dim=self.in_dim, out_dim=self.out_dim, width=self.width,
                     depth=self.depth, bias=self.bias)
 
@@ -265,7 +334,17 @@ class ResidualMLP:
 
     # ------------------------------------------------------------------ save / load
     def state(self, prefix: str = "") -> dict:
-        """The arrays that describe this network (architecture, dtype, format, parameters)."""
+        """The arrays that describe this network (architecture, dtype, format, parameters).
+
+        Examples
+        --------
+        >>> state = ResidualMLP(width=4, depth=1, seed=0).state()
+        >>> sorted(state)
+        ['bias', 'depth', 'dtype', 'format', 'format_version', 'in_dim', 'out_dim', 'theta',
+         'width']
+        >>> ResidualMLP.from_state(state).width
+        4
+        """
         a = self.architecture()
         return {
             f"{prefix}format": np.array(FORMAT),
@@ -284,6 +363,13 @@ class ResidualMLP:
         implied by the architecture fields is compared with the declared shape of ``theta``
         before anything of that size is allocated, and the parameters are read straight into
         the new network's buffer (no random initialisation is drawn).
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> again = ResidualMLP.from_state(net.state())
+        >>> bool(np.array_equal(again.pack(), net.pack()))
+        True
         """
         if prefix + "format" not in data:
             raise ModelFileError(f"{source}: missing field {prefix + 'format'!r}; not a "
@@ -323,13 +409,29 @@ class ResidualMLP:
         return net
 
     def save(self, path) -> Path:
-        """Write the network to ``path`` (.npz, no pickles), atomically (temp file + rename)."""
+        """Write the network to ``path`` (.npz, no pickles), atomically (temp file + rename).
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=4, depth=1, seed=0)
+        >>> net.save("net.npz").name
+        'net.npz'
+        >>> bool(np.array_equal(ResidualMLP.load("net.npz").pack(), net.pack()))
+        True
+        """
         return save_npz(path, self.state())
 
     @classmethod
     def load(cls, path) -> ResidualMLP:
         """Read a network written by :meth:`save`; never unpickles (sizes are checked before
-        anything is allocated: sns_np/_npz.py)."""
+        anything is allocated: sns_np/_npz.py).
+
+        Examples
+        --------
+        >>> path = ResidualMLP(width=4, depth=1, seed=0).save("net.npz")
+        >>> ResidualMLP.load(path)
+        ResidualMLP(in_dim=3, out_dim=3, width=4, depth=1, bias=False, dtype=float64; 56 parameters)
+        """
         try:
             with load_npz(path) as data:
                 return cls.from_state(data, source=str(path))
@@ -378,6 +480,19 @@ class ResidualMLP:
                  with directions, JD (n, out_dim, m) = J @ D
         order 2: (y, J, D2) with D2 (n, out_dim, in_dim, in_dim); with directions
                  D2D (n, out_dim, k, k), ``D2D[., i, a, b] = D2_i(d_a, d_b)``
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=16, depth=2, seed=0)
+        >>> x = np.array([[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]])
+        >>> y, J, D2 = net.jet(x, order=2)
+        >>> y.shape, J.shape, D2.shape
+        ((2, 3), (2, 3, 3), (2, 3, 3, 3))
+        >>> bool(np.allclose(D2, np.swapaxes(D2, 2, 3)))              # Hessians are symmetric
+        True
+        >>> JD, = net.jet(x, order=1, directions=np.eye(3)[None, :, :2].repeat(2, 0))[1:]
+        >>> bool(np.allclose(JD, J[:, :, :2]))                        # J along two directions
+        True
         """
         order = check_order(order)
         x = self._check_x(x)
@@ -420,6 +535,14 @@ class ResidualMLP:
         """The last hidden layer h(x) (n, width), so that ``y = h W3^T + b3``.
 
         Used to fit the output layer by least squares (a warm start for fitting); plain NumPy.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=16, depth=2, seed=0)
+        >>> x = np.array([[0.0, 0.0, 1.0]])
+        >>> h = net.features(x)
+        >>> h.shape, bool(np.allclose(h @ net.W3.T, net(x)))         # y = h W3^T (no bias)
+        ((1, 16), True)
         """
         from .activations import softplus
 
@@ -514,6 +637,19 @@ class ResidualMLP:
         Returns
         -------
         (n_params,) array in the network's dtype, laid out like :meth:`pack`.
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=8, depth=1, seed=0)
+        >>> x = np.array([[0.0, 0.0, 1.0]])
+        >>> dy = np.array([[1.0, 0.0, 0.0]])                           # d y_0 / d theta
+        >>> g = net.vjp(x, dy)
+        >>> eps, e = 1e-6, np.zeros(net.n_params)
+        >>> e[5] = eps
+        >>> theta = net.pack()
+        >>> fd = (net.unpack(theta + e)(x)[0, 0] - net.unpack(theta - e)(x)[0, 0]) / (2 * eps)
+        >>> bool(abs(g[5] - fd) < 1e-7)                               # matches central differences
+        True
         """
         x = self._check_x(x)
         n = x.shape[0]
@@ -562,6 +698,18 @@ class ResidualMLP:
         Returns
         -------
         (loss, grad) : float, (n_params,) array
+
+        Examples
+        --------
+        >>> net = ResidualMLP(width=8, depth=1, seed=0)
+        >>> x = np.random.default_rng(0).standard_normal((32, 3))
+        >>> def loss(y, JD, sl):      # mean |y - x|^2 + mean |J - I|^2, per chunk
+        ...     r, E = y - x[sl], JD - np.eye(3)
+        ...     n = len(x)
+        ...     return ((r ** 2).sum() + (E ** 2).sum()) / n, 2 * r / n, 2 * E / n
+        >>> value, grad = net.value_and_grad(x, loss, order=1)
+        >>> grad.shape == (net.n_params,), value > 0
+        (True, True)
         """
         x = self._check_x(x) if _m is None else x
         n = x.shape[0]

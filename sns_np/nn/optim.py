@@ -44,6 +44,12 @@ class Schedule:
         Multiply the rate by ``gamma`` every ``every`` steps.
     warmup : int
         Linear ramp from lr / warmup to lr over the first ``warmup`` steps (all kinds).
+
+    Examples
+    --------
+    >>> s = Schedule("cosine", lr=1e-3, total=100, lr_min=1e-5, warmup=10)
+    >>> [float(f"{s(t):.3g}") for t in (0, 9, 50, 100, 200)]
+    [0.0001, 0.00098, 0.000505, 1e-05, 1e-05]
     """
 
     KINDS = ("constant", "cosine", "step")
@@ -87,17 +93,37 @@ class Schedule:
 
 
 def constant(lr):
-    """A constant learning rate."""
+    """A constant learning rate.
+
+    Examples
+    --------
+    >>> constant(1e-3)(0), constant(1e-3)(10**6)
+    (0.001, 0.001)
+    """
     return Schedule("constant", lr)
 
 
 def cosine(lr, total, lr_min=0.0, warmup=0):
-    """Cosine decay from ``lr`` to ``lr_min`` over ``total`` steps."""
+    """Cosine decay from ``lr`` to ``lr_min`` over ``total`` steps.
+
+    Examples
+    --------
+    >>> s = cosine(1.0, total=4)
+    >>> [round(s(t), 4) for t in range(6)]                          # flat after total
+    [1.0, 0.8536, 0.5, 0.1464, 0.0, 0.0]
+    """
     return Schedule("cosine", lr, total=total, lr_min=lr_min, warmup=warmup)
 
 
 def step(lr, every, gamma=0.5):
-    """Multiply the rate by ``gamma`` every ``every`` steps."""
+    """Multiply the rate by ``gamma`` every ``every`` steps.
+
+    Examples
+    --------
+    >>> s = step(1.0, every=2, gamma=0.1)
+    >>> [float(f"{s(t):.3g}") for t in range(5)]
+    [1.0, 1.0, 0.1, 0.1, 0.01]
+    """
     return Schedule("step", lr, every=every, gamma=gamma)
 
 
@@ -110,7 +136,17 @@ def _as_schedule(lr):
 # ------------------------------------------------------------------------------ optimisers
 
 class Optimizer:
-    """Base class: holds the schedule, the step count and named state arrays."""
+    """Base class: holds the schedule, the step count and named state arrays.
+
+    Examples
+    --------
+    >>> opt = Adam(lr=0.1)                                         # any subclass
+    >>> theta = np.array([1.0, -2.0])
+    >>> for _ in range(200):
+    ...     _ = opt.step(theta, 2 * theta)                          # minimise |theta|^2
+    >>> bool(np.abs(theta).max() < 0.05), opt.t
+    (True, 200)
+    """
 
     _state_names: tuple = ()
 
@@ -120,7 +156,17 @@ class Optimizer:
         self._state = {}
 
     def lr(self) -> float:
-        """The learning rate of the next step."""
+        """The learning rate of the next step.
+
+        Examples
+        --------
+        >>> opt = SGD(lr=cosine(0.1, total=10))
+        >>> opt.lr()
+        0.1
+        >>> _ = opt.step(np.zeros(2), np.ones(2))
+        >>> round(opt.lr(), 6)
+        0.097553
+        """
         return float(self.schedule(self.t))
 
     def _buffers(self, theta):
@@ -134,7 +180,14 @@ class Optimizer:
         return [self._state[name] for name in self._state_names]
 
     def step(self, theta: np.ndarray, grad: np.ndarray) -> np.ndarray:
-        """Update ``theta`` in place from ``grad``; returns theta."""
+        """Update ``theta`` in place from ``grad``; returns theta.
+
+        Examples
+        --------
+        >>> opt = SGD(lr=0.5)
+        >>> opt.step(np.array([1.0, 2.0]), np.array([1.0, 1.0]))       # theta -= lr g, in place
+        array([0.5, 1.5])
+        """
         if not isinstance(theta, np.ndarray) or not np.issubdtype(theta.dtype, np.floating):
             raise ShapeError("theta must be a floating numpy array (updated in place)")
         grad = np.asarray(grad)
@@ -151,13 +204,35 @@ class Optimizer:
         raise NotImplementedError
 
     def state_dict(self) -> dict:
-        """Arrays describing the optimiser (for checkpoints); restore with load_state_dict."""
+        """Arrays describing the optimiser (for checkpoints); restore with load_state_dict.
+
+        Examples
+        --------
+        >>> opt = Adam(lr=0.1)
+        >>> _ = opt.step(np.zeros(3), np.ones(3))
+        >>> state = opt.state_dict()
+        >>> sorted(state), int(state["t"])
+        (['kind', 'm', 't', 'v'], 1)
+        """
         out = {"t": np.array(self.t), "kind": np.array(type(self).__name__)}
         for name, arr in self._state.items():
             out[name] = arr.copy()
         return out
 
     def load_state_dict(self, state: dict) -> Optimizer:
+        """Restore the state written by :meth:`state_dict` (same optimiser class); returns self.
+
+        Examples
+        --------
+        >>> a, b = Adam(lr=0.1), Adam(lr=0.1)
+        >>> theta_a, theta_b = np.zeros(2), np.zeros(2)
+        >>> _ = a.step(theta_a, np.ones(2))
+        >>> theta_b[:] = theta_a
+        >>> _ = b.load_state_dict(a.state_dict())                      # resume where a stopped
+        >>> g = np.array([0.5, -1.0])
+        >>> bool(np.array_equal(a.step(theta_a, g), b.step(theta_b, g)))
+        True
+        """
         kind = str(state.get("kind", ""))
         if kind != type(self).__name__:
             raise ValueError(f"optimiser state is for {kind!r}, not {type(self).__name__!r}")
@@ -171,6 +246,15 @@ class SGD(Optimizer):
     """Gradient descent with optional (Nesterov) momentum.
 
     buf = momentum buf + g;  theta -= lr (g + momentum buf if nesterov else buf)
+
+    Examples
+    --------
+    >>> opt = SGD(lr=0.1, momentum=0.9)
+    >>> theta = np.array([1.0])
+    >>> for _ in range(3):
+    ...     _ = opt.step(theta, np.array([1.0]))
+    >>> theta.round(4)                              # steps 0.1, 0.19, 0.271
+    array([0.439])
     """
 
     _state_names = ("buf",)
@@ -196,6 +280,13 @@ class Adam(Optimizer):
     m = b1 m + (1 - b1) g;   v = b2 v + (1 - b2) g^2          (first and second moments)
     m^ = m / (1 - b1^t);     v^ = v / (1 - b2^t)              (bias correction, t from 1)
     theta -= lr m^ / (sqrt(v^) + eps)
+
+    Examples
+    --------
+    >>> opt = Adam(lr=0.1)
+    >>> theta = np.array([1.0, -1.0])
+    >>> opt.step(theta, np.array([3.0, -0.001]))   # first step: lr sign(g), bias-corrected
+    array([ 0.9     , -0.900001])
     """
 
     _state_names = ("m", "v")
@@ -227,6 +318,13 @@ class RMSProp(Optimizer):
     buf = momentum buf + d;          theta -= lr buf     (theta -= lr d without momentum)
 
     The reference fits surfaces with lr 1e-4 and momentum 0.9 (alpha 0.99, eps 1e-8).
+
+    Examples
+    --------
+    >>> opt = RMSProp(lr=0.01, momentum=0.0)
+    >>> theta = np.array([1.0])
+    >>> opt.step(theta, np.array([2.0]))           # v = 0.01 g^2: the first step is 10 lr
+    array([0.9])
     """
 
     _state_names = ("v", "buf")
@@ -256,7 +354,16 @@ _OPTIMIZERS = {"adam": Adam, "rmsprop": RMSProp, "sgd": SGD}
 
 
 def make_optimizer(name: str, lr, **options) -> Optimizer:
-    """Optimiser by name: "adam", "rmsprop" or "sgd"."""
+    """Optimiser by name: "adam", "rmsprop" or "sgd".
+
+    Examples
+    --------
+    >>> opt = make_optimizer("rmsprop", 1e-4, momentum=0.9)
+    >>> type(opt).__name__, opt.lr(), opt.momentum
+    ('RMSProp', 0.0001, 0.9)
+    >>> type(make_optimizer("Adam", cosine(1e-3, 100))).__name__
+    'Adam'
+    """
     key = str(name).lower()
     if key not in _OPTIMIZERS:
         raise ValueError(f"unknown optimiser {name!r}; expected one of {sorted(_OPTIMIZERS)}")

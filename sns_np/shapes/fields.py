@@ -48,6 +48,15 @@ class LinearField:
         self.a, self.b = a, float(b)
 
     def jet(self, x, order: int = 0):
+        """Value ``a . x + b`` (n,), gradient ``a`` (n, 3) and Hessian 0 (n, 3, 3).
+
+        Examples
+        --------
+        >>> f = LinearField([1.0, 2.0, 0.0], b=0.5)
+        >>> v, g, H = f.jet(np.array([[1.0, 0.0, 0.0]]), order=2)
+        >>> v, g, float(abs(H).max())
+        (array([1.5]), array([[1., 2., 0.]]), 0.0)
+        """
         x = as_points(x, "x")
         order = check_order(order)
         v = x @ self.a + self.b
@@ -58,7 +67,13 @@ class LinearField:
 
 
 def coordinate_field(i: int) -> LinearField:
-    """The coordinate function ``x_i`` (i = 0, 1, 2) as a :class:`LinearField`."""
+    """The coordinate function ``x_i`` (i = 0, 1, 2) as a :class:`LinearField`.
+
+    Examples
+    --------
+    >>> coordinate_field(2).jet(np.array([[0.0, 0.6, 0.8]]), 0)
+    array([0.8])
+    """
     if i not in (0, 1, 2):
         raise ValueError(f"coordinate index must be 0, 1 or 2, got {i!r}")
     return LinearField(np.eye(3)[i])
@@ -100,6 +115,20 @@ class SphericalHarmonic:
         self._norm = norm * (sqrt(2.0) if am else 1.0)
 
     def jet(self, x, order: int = 0):
+        """The solid harmonic ``r^l Y_lm(x / r)``: value (n,), gradient (n, 3), Hessian (n, 3, 3).
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> p = np.array([[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]])
+        >>> Y = SphericalHarmonic(3, -2)
+        >>> err = check_jet(Y, p, order=2)
+        >>> bool(max(err.values()) < 1e-6)
+        True
+        >>> v, g, H = Y.jet(p, 2)
+        >>> bool(np.allclose(np.trace(H, axis1=1, axis2=2), 0.0))  # a solid harmonic: Laplacian 0
+        True
+        """
         x = as_points(x, "x")
         order = check_order(order)
         X, Y, Z = Jet.coordinates(x, order)
@@ -158,6 +187,16 @@ class SineWaveField:
         self.chirp_direction = unit(chirp_direction, "chirp_direction")
 
     def jet(self, x, order: int = 0):
+        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) of the sine wave at ``x``.
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> p = np.array([[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]])
+        >>> err = check_jet(SineWaveField(), p, order=2)
+        >>> bool(max(err.values()) < 1e-6)
+        True
+        """
         x = as_points(x, "x")
         order = check_order(order)
         X = Jet.coordinates(x, order)
@@ -186,6 +225,17 @@ class PullbackField:
         self.field, self.surface = field, surface
 
     def jet(self, x, order: int = 0):
+        """Value, gradient ``J^T grad f`` and Hessian of ``f(S(p))`` (field protocol).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Ellipsoid
+        >>> S = Ellipsoid(1.0, 2.0, 3.0)
+        >>> g = PullbackField(coordinate_field(1), S)       # g(p) = y-coordinate of S(p) = 2 p_y
+        >>> v, grad = g.jet(np.array([[0.0, 1.0, 0.0]]), order=1)
+        >>> v, grad
+        (array([2.]), array([[0., 2., 0.]]))
+        """
         x = as_points(x, "x")
         order = check_order(order)
         if order == 0:
@@ -218,6 +268,15 @@ class ComponentField:
         self.surface, self.i = surface, int(i)
 
     def jet(self, x, order: int = 0):
+        """Value ``y_i`` (n,), gradient ``J_i`` (n, 3) and Hessian ``D2_i`` (n, 3, 3).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> v, grad, H = ComponentField(Sphere(2.0), 0).jet(np.array([[1.0, 0.0, 0.0]]), 2)
+        >>> v, grad
+        (array([2.]), array([[2., 0., 0.]]))
+        """
         x = as_points(x, "x")
         order = check_order(order)
         out = surface_jet(self.surface, x, order)

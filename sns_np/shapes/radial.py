@@ -112,6 +112,14 @@ class RadialShape(AnalyticShape):
     With ``G_a``, ``G_ab`` the ambient derivatives of ``G``:
     ``J_ia = s ((1 + G) delta_ia + x_i G_a)`` and
     ``D2_iab = s (x_i G_ab + delta_ia G_b + delta_ib G_a)``.
+
+    Examples
+    --------
+    >>> S = Spike()                     # a RadialShape: S(x) = s (1 + G(x)) x
+    >>> p = np.array([[0.6, 0.0, 0.8]])
+    >>> y = S(p)
+    >>> bool(np.allclose(y / np.linalg.norm(y), p))   # radial: y is a multiple of p
+    True
     """
 
     family = ""
@@ -122,14 +130,39 @@ class RadialShape(AnalyticShape):
 
     @classmethod
     def small(cls):
-        """The paper's SMALL* version of this family."""
+        """The paper's SMALL* version of this family.
+
+        Examples
+        --------
+        >>> Flower.small(), Tree.small().scale
+        (Flower(scale=0.366), 0.301)
+        """
         return cls(SMALL_SCALES[cls.family])
 
     def g(self, a: PolarAngles) -> Jet:  # pragma: no cover - abstract
+        """The radius perturbation ``g(theta, phi)`` as a :class:`Jet` of the ambient point
+        (each family defines it).
+
+        Examples
+        --------
+        >>> from sns_np.shapes.radial import PolarAngles
+        >>> from sns_np.shapes._jet import Jet
+        >>> x = np.array([[0.6, 0.0, 0.8]])
+        >>> G = Spike().g(PolarAngles(*Jet.coordinates(x, 0)))
+        >>> bool(np.allclose(G.v, Spike().radius_function(x).v))
+        True
+        """
         raise NotImplementedError
 
     def radius_function(self, x, order: int = 0):
-        """``G(x) = g(theta(x), phi(x))`` as a :class:`Jet` (value, gradient, Hessian in R^3)."""
+        """``G(x) = g(theta(x), phi(x))`` as a :class:`Jet` (value, gradient, Hessian in R^3).
+
+        Examples
+        --------
+        >>> G = Bobble().radius_function(np.array([[0.6, 0.0, 0.8]]), order=2)
+        >>> G.v.shape, G.g.shape, G.h.shape                 # value, gradient, Hessian of G
+        ((1,), (1, 3), (1, 3, 3))
+        """
         x = as_points(x, "x")
         order = check_order(order)
         r2 = np.einsum("ka,ka->k", x, x)
@@ -152,7 +185,16 @@ class RadialShape(AnalyticShape):
         return G
 
     def jet(self, x, order: int = 0):
-        """Value, Jacobian and second derivatives of ``S(x) = s (1 + G(x)) x`` (ambient)."""
+        """Value, Jacobian and second derivatives of ``S(x) = s (1 + G(x)) x`` (ambient).
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> p = np.array([[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]])
+        >>> err = check_jet(Flower(), p, order=2)
+        >>> bool(max(err.values()) < 1e-5)          # exact derivatives vs central differences
+        True
+        """
         x = as_points(x, "x")
         order = check_order(order)
         G = self.radius_function(x, order)
@@ -190,6 +232,20 @@ class Flower(RadialShape):
     pole_c = (0.21 * PI**2, 0.21 * PI**2)
 
     def g(self, a):
+        """FLOWER's ``g(theta, phi)`` (see the class docstring).
+
+        Examples
+        --------
+        >>> from sns_np.shapes.radial import PolarAngles
+        >>> from sns_np.shapes._jet import Jet
+        >>> equator = np.array([[1.0, 0.0, 0.0]])           # theta = pi/2, phi = 0
+        >>> theta = np.pi / 2
+        >>> Q = (theta * (np.pi - theta)) ** 2
+        >>> g = Flower().g(PolarAngles(*Jet.coordinates(equator, 0))).v
+        >>> bool(np.allclose(g, 0.3 * (0.4 * Q * np.cos(18 * theta) ** 2
+        ...                            + 0.6 * Q * np.sin(18 * theta) ** 2)))
+        True
+        """
         Q, t, f = a.Q(), a.theta, a.phi
         return 0.3 * (0.4 * Q * a.cos(18) ** 2 + 0.6 * Q * sin(6 * f + 18 * t) ** 2)
 
@@ -198,12 +254,29 @@ class Bobble(RadialShape):
     """BOBBLE: ``g = 0.1 (0.4 Q cos^2(12 theta) + 0.4 Q sin^2(12 phi + 6 theta))``.
 
     Not twice differentiable at the poles; ``c = 0.1 pi^2 (0.4 + 0.2)`` at both.
+
+    Examples
+    --------
+    >>> S = Bobble.small()
+    >>> float(np.linalg.norm(S(np.array([[0.0, 0.0, 1.0]]))))    # g = 0 at the poles: radius s
+    0.679
     """
 
     family = "bobble"
     pole_c = (0.06 * PI**2, 0.06 * PI**2)
 
     def g(self, a):
+        """BOBBLE's ``g(theta, phi)`` (see the class docstring).
+
+        Examples
+        --------
+        >>> from sns_np.shapes.radial import PolarAngles
+        >>> from sns_np.shapes._jet import Jet
+        >>> x = np.array([[0.0, 0.6, 0.8]])
+        >>> G = Bobble().g(PolarAngles(*Jet.coordinates(x, 0)))
+        >>> bool(np.allclose(G.v, Bobble().radius_function(x).v)), bool(G.v[0] >= 0)
+        (True, True)
+        """
         Q, t, f = a.Q(), a.theta, a.phi
         return 0.1 * (0.4 * Q * a.cos(12) ** 2 + 0.4 * Q * sin(12 * f + 6 * t) ** 2)
 
@@ -212,12 +285,31 @@ class Spike(RadialShape):
     """SPIKE: ``g = 0.4 sin^2(theta) sin(6 theta) sin(6 phi)``.
 
     ``g ~ 2.4 t^3 sin(6 phi)`` near the poles: C^2 there (Hessian 0, ``c = 0``), not C^3.
+
+    Examples
+    --------
+    >>> S = Spike()
+    >>> p = np.array([[np.cos(0.3), np.sin(0.3), 0.0]])    # on the equator sin(6 theta) = 0
+    >>> round(float(np.linalg.norm(S(p))), 9)              # so g = 0 there: radius s = 1
+    1.0
     """
 
     family = "spike"
     pole_c = (0.0, 0.0)
 
     def g(self, a):
+        """SPIKE's ``g(theta, phi)`` (see the class docstring).
+
+        Examples
+        --------
+        >>> from sns_np.shapes.radial import PolarAngles
+        >>> from sns_np.shapes._jet import Jet
+        >>> t, f = 1.0, 0.2                                  # theta, phi
+        >>> x = np.array([[np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)]])
+        >>> G = Spike().g(PolarAngles(*Jet.coordinates(x, 0)))
+        >>> bool(np.allclose(G.v, 0.4 * np.sin(t) ** 2 * np.sin(6 * t) * np.sin(6 * f)))
+        True
+        """
         return 0.4 * a.sin(1) ** 2 * a.sin(6) * sin(6 * a.phi)
 
 
@@ -227,12 +319,31 @@ class Tree(RadialShape):
     Not twice differentiable at the poles. North: ``theta^3 sin^2(6 theta) = O(t^5)``, so
     ``c = 0.05 * 0.3 pi^2``; south: ``theta^3 sin^2(6 theta) ~ 36 pi^3 t^2``, so
     ``c = 0.05 (72 pi^3 + 0.3 pi^2)``.
+
+    Examples
+    --------
+    >>> S = Tree.small()
+    >>> V, F = S.mesh(2)
+    >>> V.shape, bool(np.linalg.norm(V, axis=1).min() >= S.scale)   # g >= 0: outside radius s
+    ((162, 3), True)
     """
 
     family = "tree"
     pole_c = (0.015 * PI**2, 0.05 * (72 * PI**3 + 0.3 * PI**2))
 
     def g(self, a):
+        """TREE's ``g(theta, phi)`` (see the class docstring).
+
+        Examples
+        --------
+        >>> from sns_np.shapes.radial import PolarAngles
+        >>> from sns_np.shapes._jet import Jet
+        >>> x = np.array([[0.0, 0.0, -1.0]])                 # the south pole: theta = pi, Q = 0
+        >>> t = np.pi
+        >>> G = Tree().g(PolarAngles(*Jet.coordinates(x, 0)))
+        >>> bool(np.allclose(G.v, 0.05 * 2 * t ** 3 * np.sin(6 * t) ** 2))
+        True
+        """
         t, f = a.theta, a.phi
         return 0.05 * (2 * t**3 * a.sin(6) ** 2 + 0.6 * a.Q() * sin(6 * f + 6 * t**2) ** 2)
 

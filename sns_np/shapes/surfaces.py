@@ -16,9 +16,30 @@ __all__ = ["AnalyticShape", "LinearShape", "Sphere", "Ellipsoid", "PerturbedElli
 
 
 class AnalyticShape:
-    """Base class: a surface map ``S: R^3 -> R^3`` with exact jets and a mesher."""
+    """Base class: a surface map ``S: R^3 -> R^3`` with exact jets and a mesher.
+
+    Examples
+    --------
+    >>> class Cone(AnalyticShape):       # a custom map only needs jet(x, order)
+    ...     def jet(self, x, order=0):
+    ...         y = x * [1.0, 1.0, 2.0]
+    ...         J = np.broadcast_to(np.diag([1.0, 1.0, 2.0]), (len(x), 3, 3))
+    ...         return (y, J, np.zeros((len(x), 3, 3, 3)))[:order + 1] if order else y
+    >>> V, F = Cone().mesh(1)
+    >>> float(V[:, 2].max())
+    2.0
+    """
 
     def jet(self, x, order: int = 0):  # pragma: no cover - abstract
+        """Value ``y`` (n, 3), and with ``order`` 1 or 2 also ``J`` (n, 3, 3) and ``D2``
+        (n, 3, 3, 3), ambient (DESIGN.md).
+
+        Examples
+        --------
+        >>> y, J, D2 = Ellipsoid(1.0, 2.0, 3.0).jet(np.array([[0.0, 0.0, 1.0]]), order=2)
+        >>> y, J[0].diagonal(), float(abs(D2).max())
+        (array([[0., 0., 3.]]), array([1., 2., 3.]), 0.0)
+        """
         raise NotImplementedError
 
     def __call__(self, x) -> np.ndarray:
@@ -76,6 +97,15 @@ class LinearShape(AnalyticShape):
         self.A = A
 
     def jet(self, x, order: int = 0):
+        """``y = A x``, ``J = A``, ``D2 = 0`` at the points ``x`` (n, 3).
+
+        Examples
+        --------
+        >>> S = LinearShape([[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 2.0]])
+        >>> y, J = S.jet(np.array([[0.0, 1.0, 0.0]]), order=1)
+        >>> y, bool(np.array_equal(J[0], S.A))
+        (array([[0.5, 1. , 0. ]]), True)
+        """
         x = as_points(x, "x")
         order = check_order(order)
         y = x @ self.A.T
@@ -176,6 +206,17 @@ class PerturbedEllipsoid(AnalyticShape):
         self.c = np.array([0.3, -1.2, 2.0])
 
     def jet(self, x, order: int = 0):
+        """``y = A x + eps B sin(W x + c)`` with its exact ``J`` and ``D2``.
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> p = np.array([[0.6, 0.0, 0.8], [0.0, -1.0, 0.0]])
+        >>> S = PerturbedEllipsoid()
+        >>> err = check_jet(S, p, order=2)
+        >>> bool(max(err.values()) < 1e-6)          # exact derivatives vs central differences
+        True
+        """
         x = as_points(x, "x")
         order = check_order(order)
         u = x @ self.W.T + self.c
