@@ -28,6 +28,13 @@ def ellipsoid_foot_point(x, axes=AXES, iterations=100):
     inside or far outside, where plain Newton from t = 0 overshoots the pole at -min a_i^2.
     A point with no component along the shortest axis may have two closest points; this
     returns one of them.
+
+    Examples
+    --------
+    >>> x = np.array([[0.0, 0.0, 5.0], [3.0, 0.0, 0.0]])
+    >>> ellipsoid_foot_point(x)                       # the nearest points on the ellipsoid
+    array([[0. , 0. , 0.7],
+           [1. , 0. , 0. ]])
     """
     a2 = np.asarray(axes, dtype=np.float64) ** 2
     x = np.asarray(x, dtype=np.float64)
@@ -57,6 +64,12 @@ def ellipsoid_geometry(y, axes=AXES):
 
     With h = |(y_i / a_i^2)|:  n = (y_i / a_i^2) / h,  K = 1 / ((abc)^2 h^4),
     H = (a^2 + b^2 + c^2 - |y|^2) / (2 (abc)^2 h^3)  (positive: convex, outward normals).
+
+    Examples
+    --------
+    >>> n, H, K = ellipsoid_geometry(np.array([[0.0, 0.0, 0.7]]), axes=(1.0, 1.3, 0.7))
+    >>> n, H.round(6), K.round(6)                     # K = c^2 / (a b)^2 at the pole
+    (array([[0., 0., 1.]]), array([0.557101]), array([0.289941]))
     """
     a = np.asarray(axes, dtype=np.float64)
     g = y / a ** 2
@@ -86,6 +99,13 @@ def run_demo(level=4, out=None, progress=True, print_fn=print, **fit_options):
     progress : bool
     print_fn : callable used for the report lines
     **fit_options : passed to :func:`sns_np.surface.fit_mesh` (steps, time_budget, ...)
+
+    Examples
+    --------
+    >>> figures = run_demo(level=2, width=16, depth=1, steps=20, batch=256, progress=False,
+    ...                    print_fn=lambda line: None)            # tiny: the default fits 800 steps
+    >>> isinstance(figures, dict) and len(figures) > 0
+    True
     """
     from .geometry import differential_quantities
     from .mesh import check, spherical_embedding

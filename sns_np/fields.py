@@ -82,7 +82,19 @@ class NeuralField:
 
     # -------------------------------------------------------------- field protocol
     def jet(self, x, order: int = 0):
-        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) at ``x`` (n, 3), ambient in R^3."""
+        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) at ``x`` (n, 3), ambient in R^3.
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> f = NeuralField(seed=0)
+        >>> p = np.array([[0.0, 0.6, 0.8]])
+        >>> v, g, H = f.jet(p, order=2)
+        >>> bool(np.allclose(v, f.net(p).mean(axis=1)))          # the mean of the 3 outputs
+        True
+        >>> bool(max(check_jet(f, p).values()) < 1e-6)
+        True
+        """
         order = check_order(order)
         x = as_points(x, "x")
         c = self.scale / self.net.out_dim
@@ -92,7 +104,15 @@ class NeuralField:
         return tuple(c * a.sum(axis=1) for a in out)
 
     def __call__(self, x) -> np.ndarray:
-        """The value at ``x`` (n, 3), (n,)."""
+        """The value at ``x`` (n, 3), (n,).
+
+        Examples
+        --------
+        >>> f = NeuralField(seed=0, scale=2.0)
+        >>> p = np.array([[1.0, 0.0, 0.0]])
+        >>> bool(np.allclose(f(p), 2.0 * f.net(p).mean(axis=1))), f.value(p).shape
+        (True, (1,))
+        """
         return self.jet(x, 0)
 
     value = __call__
@@ -108,6 +128,16 @@ class NeuralField:
         return self.net.n_params
 
     def copy(self) -> NeuralField:
+        """An independent field with the same network parameters and scale.
+
+        Examples
+        --------
+        >>> f = NeuralField(seed=0)
+        >>> g = f.copy()
+        >>> g.theta[:] = 0.0
+        >>> float(abs(f.theta).max()) > 0                        # f keeps its parameters
+        True
+        """
         return NeuralField(net=self.net.copy(), scale=self.scale)
 
     def __repr__(self):
@@ -116,6 +146,16 @@ class NeuralField:
 
     # -------------------------------------------------------------- files
     def state(self, prefix: str = "") -> dict:
+        """The arrays that describe the field (format, scale and its network's
+        :meth:`ResidualMLP.state` under ``net.``).
+
+        Examples
+        --------
+        >>> f = NeuralField(width=4, depth=1, seed=0)
+        >>> state = f.state()
+        >>> str(state["format"]), bool(np.array_equal(state["net.theta"], f.theta))
+        ('sns_np.NeuralField', True)
+        """
         out = {f"{prefix}format": np.array(FORMAT),
                f"{prefix}format_version": np.array(FORMAT_VERSION),
                f"{prefix}scale": np.array(self.scale)}
@@ -124,6 +164,16 @@ class NeuralField:
 
     @classmethod
     def from_state(cls, data, prefix: str = "", source: str = "state") -> NeuralField:
+        """Rebuild a field from :meth:`state` arrays (or an open file), checking every field; any
+        problem is a :class:`ModelFileError` naming ``source``.
+
+        Examples
+        --------
+        >>> f = NeuralField(width=4, depth=1, seed=0, scale=0.5)
+        >>> g = NeuralField.from_state(f.state())
+        >>> g.scale, bool(np.array_equal(g.theta, f.theta))
+        (0.5, True)
+        """
         key = f"{prefix}format"
         found = (_npz.field(data, key, source, kinds="U", what="text") if key in data
                  else "nothing")
@@ -141,12 +191,25 @@ class NeuralField:
             raise ModelFileError(f"{source}: invalid field ({exc})") from None
 
     def save(self, path):
-        """Write the field to ``path`` (.npz, no pickles), atomically."""
+        """Write the field to ``path`` (.npz, no pickles), atomically.
+
+        Examples
+        --------
+        >>> NeuralField(seed=0).save("mode.npz").name
+        'mode.npz'
+        """
         return save_npz(path, self.state())
 
     @classmethod
     def load(cls, path) -> NeuralField:
-        """Read a field written by :meth:`save`."""
+        """Read a field written by :meth:`save`.
+
+        Examples
+        --------
+        >>> path = NeuralField(width=4, depth=1, seed=0).save("mode.npz")
+        >>> NeuralField.load(path)
+        NeuralField(width=4, depth=1, n_outputs=3, scale=1)
+        """
         try:
             with load_npz(path) as data:
                 return cls.from_state(data, source=str(path))
@@ -158,7 +221,18 @@ class NeuralField:
 
 @dataclass
 class EigenLoss:
-    """The terms of the eigenfunction loss at one evaluation (all floats)."""
+    """The terms of the eigenfunction loss at one evaluation (all floats).
+
+    Examples
+    --------
+    >>> from sns_np.sampling import surface_sample
+    >>> from sns_np.shapes import Sphere
+    >>> s = surface_sample(Sphere(), 200, method="quadrature")
+    >>> loss, _ = eigen_loss(NeuralField(seed=0), s, lambda_ortho=1e3, lambda_reg=1e3)
+    >>> sorted(vars(loss)), bool(np.isclose(loss.total,
+    ...     loss.rayleigh + 1e3 * loss.ortho + 1e3 * loss.reg))
+    (['norm', 'ortho', 'rayleigh', 'reg', 'total'], True)
+    """
 
     total: float
     rayleigh: float
@@ -271,6 +345,18 @@ def rayleigh_loss(field: NeuralField, sample: SurfaceSample):
     Returns
     -------
     (float, (n_params,) float array)
+
+    Examples
+    --------
+    >>> from sns_np.sampling import rayleigh_quotient, surface_sample
+    >>> from sns_np.shapes import Sphere
+    >>> s = surface_sample(Sphere(), 800, method="quadrature")
+    >>> f = NeuralField(seed=0)
+    >>> q, grad = rayleigh_loss(f, s)
+    >>> bool(np.isclose(q, rayleigh_quotient(Sphere(), f, 800, method="quadrature").value))
+    True
+    >>> grad.shape
+    (460,)
     """
     loss, grad = eigen_loss(field, sample)
     return loss.rayleigh, grad
@@ -278,12 +364,35 @@ def rayleigh_loss(field: NeuralField, sample: SurfaceSample):
 
 def orthogonality_loss(field: NeuralField, sample: SurfaceSample, previous):
     """``sum_j <h, phi_j>^2`` (paper Eq. 25) and its gradient; ``previous`` (n, k) as in
-    :func:`eigen_loss`."""
+    :func:`eigen_loss`.
+
+    Examples
+    --------
+    >>> from sns_np.sampling import surface_sample
+    >>> from sns_np.shapes import Sphere
+    >>> s = surface_sample(Sphere(), 800, method="quadrature")
+    >>> constant = np.full((len(s), 1), 1 / np.sqrt(4 * np.pi))   # the unit-norm constant mode
+    >>> value, grad = orthogonality_loss(NeuralField(seed=0), s, constant)
+    >>> value >= 0, grad.shape
+    (True, (460,))
+    """
     loss, grad = eigen_loss(field, sample, previous, lambda_ortho=1.0, rayleigh=0.0)
     return loss.ortho, grad
 
 
 def unit_norm_loss(field: NeuralField, sample: SurfaceSample):
-    """``(||h|| - 1)^2`` (paper Eq. 26) and its gradient."""
+    """``(||h|| - 1)^2`` (paper Eq. 26) and its gradient.
+
+    Examples
+    --------
+    >>> from sns_np.sampling import surface_sample
+    >>> from sns_np.shapes import Sphere
+    >>> s = surface_sample(Sphere(), 800, method="quadrature")
+    >>> f = NeuralField(seed=0)
+    >>> norm = np.sqrt(s.integral(f(s.p) ** 2).value)
+    >>> value, grad = unit_norm_loss(f, s)
+    >>> bool(np.isclose(value, (norm - 1) ** 2))
+    True
+    """
     loss, grad = eigen_loss(field, sample, lambda_reg=1.0, rayleigh=0.0)
     return loss.reg, grad

@@ -49,7 +49,6 @@ PENDING = {
     "sns_np.mesh.correspondence.Correspondence.phong_point",
     "sns_np.mesh.correspondence.Correspondence.sample_barycentric",
     "sns_np.mesh.correspondence.Correspondence.sample",
-    "sns_np.mesh.correspondence.Correspondence.locator",
     "sns_np.mesh.correspondence.Correspondence.locate",
     "sns_np.mesh.correspondence.Correspondence.mesh_point",
     "sns_np.mesh.correspondence.uniform_barycentric",

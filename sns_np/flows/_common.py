@@ -69,6 +69,11 @@ def stability_limit(area, n_points):
     ``N`` modes, and by Weyl's law the ``N``-th eigenvalue of a surface of area ``A`` is
     ``lambda_N ~ 4 pi N / A``. Hence ``dt <= 2 / lambda_N = A / (2 pi N) = h^2 / (2 pi)`` with
     ``h = sqrt(A / N)`` the mean sample spacing (docs/flows.md).
+
+    Examples
+    --------
+    >>> round(stability_limit(4 * np.pi, 1000), 6)           # unit sphere, 1000 sample points
+    0.002
     """
     return float(area) / (2.0 * math.pi * int(n_points))
 

@@ -77,6 +77,14 @@ class HeatFlowResult:
     seconds : float
     stopped : str, "t_end" or the divergence message
     info : dict, scheme details (sample size, initial fit error, projection residual, ...)
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere, SphericalHarmonic
+    >>> res = heat_flow(Sphere(), SphericalHarmonic(1, 0), 0.5, 0.05, method="spectral", k=3,
+    ...                 n_snapshots=2)
+    >>> len(res), res.times.tolist(), res.method
+    (3, [0.0, 0.25, 0.5], 'spectral')
     """
 
     times: np.ndarray
@@ -92,14 +100,35 @@ class HeatFlowResult:
         return len(self.times)
 
     def evaluate(self, p) -> np.ndarray:
-        """All snapshots at sphere points ``p`` (n, 3), as an (n, m) array."""
+        """All snapshots at sphere points ``p`` (n, 3), as an (n, m) array.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere, SphericalHarmonic
+        >>> res = heat_flow(Sphere(), SphericalHarmonic(1, 0), 0.5, 0.05, method="spectral", k=3,
+        ...                 n_snapshots=2)
+        >>> f = res.evaluate(np.array([[0.0, 0.0, 1.0]]))            # Y_10 decays like exp(-2 t)
+        >>> (f[0] / f[0, 0]).round(6), np.exp(-2 * res.times).round(6)
+        (array([1.      , 0.606531, 0.367879]), array([1.      , 0.606531, 0.367879]))
+        """
         p = as_points(p, "p")
         return np.stack([field_jet(f, p, 0) for f in self.fields], axis=1)
 
     def save(self, folder, surface, level: int = 5, overwrite: bool = False):
         """Write ``heat_000.ply`` ... (the surface mesh with the field ``f`` per vertex),
         ``heat_000.npz`` for neural fields, and ``flow.json`` (times, method, stop reason),
-        into ``folder`` atomically. Returns the folder's Path."""
+        into ``folder`` atomically. Returns the folder's Path.
+
+        Examples
+        --------
+        >>> import os
+        >>> from sns_np.shapes import Sphere, SphericalHarmonic
+        >>> res = heat_flow(Sphere(), SphericalHarmonic(1, 0), 0.5, 0.05, method="spectral", k=3,
+        ...                 n_snapshots=2)
+        >>> folder = res.save("heat_out", Sphere(), level=1)
+        >>> sorted(os.listdir(folder))
+        ['flow.json', 'heat_000.ply', 'heat_001.ply', 'heat_002.ply']
+        """
         from ..mesh import icosphere, write_mesh
         from ..protocol import surface_jet
         from ._common import atomic_folder
@@ -116,6 +145,18 @@ class HeatFlowResult:
         return atomic_folder(folder, write, overwrite)
 
     def summary_dict(self) -> dict:
+        """The snapshot times, method, steps, timing, stop reason and scalar details as a JSON-ready
+        dict (what ``flow.json`` holds).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere, SphericalHarmonic
+        >>> res = heat_flow(Sphere(), SphericalHarmonic(1, 0), 0.5, 0.05, method="spectral", k=3,
+        ...                 n_snapshots=2)
+        >>> d = res.summary_dict()
+        >>> d["flow"], d["method"], d["times"], d["stopped"]
+        ('heat', 'spectral', [0.0, 0.25, 0.5], 't_end')
+        """
         return {"flow": "heat", "method": self.method, "times": [float(t) for t in self.times],
                 "steps": self.steps, "seconds": self.seconds, "stopped": self.stopped,
                 "stability_limit": self.stability_limit,
@@ -152,6 +193,17 @@ class ModalField:
                              f"{self.coefficients.shape[0]} coefficients")
 
     def jet(self, x, order: int = 0):
+        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) of the combination at ``x`` (n, 3).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import SphericalHarmonic
+        >>> g = ModalField(0.5, [SphericalHarmonic(1, 1)], [2.0])      # 0.5 + 2 Y_11
+        >>> v, grad = g.jet(np.array([[1.0, 0.0, 0.0]]), 1)
+        >>> c = np.sqrt(3 / (4 * np.pi))                              # Y_11 = c x
+        >>> bool(np.isclose(v[0], 0.5 + 2 * c)), bool(np.allclose(grad, [[2 * c, 0.0, 0.0]]))
+        (True, True)
+        """
         x = as_points(x, "x")
         n = x.shape[0]
         out = [np.full(n, self.constant), np.zeros((n, 3)), np.zeros((n, 3, 3))][:order + 1]
@@ -165,6 +217,15 @@ class ModalField:
         return out[0] if order == 0 else tuple(out)
 
     def __call__(self, x):
+        """The value at ``x`` (n, 3), (n,).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import SphericalHarmonic
+        >>> g = ModalField(1.0, [SphericalHarmonic(1, 0), SphericalHarmonic(2, 0)], [0.0, 0.0])
+        >>> g(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))           # only the constant
+        array([1., 1.])
+        """
         return self.jet(x, 0)
 
     value = __call__

@@ -68,6 +68,16 @@ class MeanCurvatureFlowResult:
     seconds : float
     stopped : str, "t_end" or the divergence message
     info : dict, per-step refit errors (``refit_rms``, input units), sample size, options
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> from sns_np.surface import fit_shape
+    >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
+    >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
+    ...                           n_snapshots=2, stability="ignore")
+    >>> len(res), res.times.tolist(), len(res.surfaces), res.stopped
+    (3, [0.0, 0.01, 0.02], 3, 't_end')
     """
 
     times: np.ndarray
@@ -85,7 +95,19 @@ class MeanCurvatureFlowResult:
 
     def save(self, folder, level: int = 5, models: bool = True, overwrite: bool = False):
         """Write ``mcf_000.ply`` ... (meshes with normal, H, K per vertex), the models
-        ``mcf_000.npz`` ... (``models=True``) and ``flow.json``, into ``folder`` atomically."""
+        ``mcf_000.npz`` ... (``models=True``) and ``flow.json``, into ``folder`` atomically.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> from sns_np.surface import fit_shape
+        >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
+        >>> import os
+        >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
+        ...                           n_snapshots=1, stability="ignore")
+        >>> sorted(os.listdir(res.save("mcf_out", level=1)))
+        ['flow.json', 'mcf_000.npz', 'mcf_000.ply', 'mcf_001.npz', 'mcf_001.ply']
+        """
         from ..mesh import write_mesh
         from ._common import atomic_folder
 
@@ -100,6 +122,20 @@ class MeanCurvatureFlowResult:
         return atomic_folder(folder, write, overwrite)
 
     def summary_dict(self) -> dict:
+        """Times, areas, steps, timing, stop reason and sample size as a JSON-ready dict (what
+        ``flow.json`` holds).
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> from sns_np.surface import fit_shape
+        >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
+        >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
+        ...                           n_snapshots=1, stability="ignore")
+        >>> d = res.summary_dict()
+        >>> d["flow"], d["steps"], d["n_points"], len(d["areas"])
+        ('mean_curvature', 2, 128, 2)
+        """
         return {"flow": "mean_curvature", "times": [float(t) for t in self.times],
                 "areas": [float(a) for a in self.areas], "steps": self.steps,
                 "seconds": self.seconds, "stopped": self.stopped,
@@ -174,6 +210,17 @@ def mean_curvature_flow(surface, t_end, dt, *, times=None, n_snapshots: int = 10
     DivergenceError
         A refit diverged (non-finite values, a degenerate map, a growing area);
         ``exc.result`` holds the snapshots up to the last good surface.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> from sns_np.surface import fit_shape
+    >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
+    >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=10, n_points=256, rng=0,
+    ...                           n_snapshots=2, stability="ignore")
+    >>> ratio = res.areas / res.areas[0]                  # a sphere: A(t) = A(0) (1 - 4 t)
+    >>> ratio.round(2), (1 - 4 * res.times).round(2)
+    (array([1.  , 0.96, 0.92]), array([1.  , 0.96, 0.92]))
     """
     if not isinstance(surface, SphericalNeuralSurface):
         raise TypeError(f"surface must be a SphericalNeuralSurface (the flow refits its "

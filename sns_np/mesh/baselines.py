@@ -19,7 +19,15 @@ __all__ = ["Curvatures", "baseline_curvatures", "discrete_curvatures"]
 
 @dataclass(frozen=True)
 class Curvatures:
-    """Per-vertex curvatures (arrays of length n; directions (n, 3), or None when not given)."""
+    """Per-vertex curvatures (arrays of length n; directions (n, 3), or None when not given).
+
+    Examples
+    --------
+    >>> from sns_np.mesh import discrete_curvatures, icosphere
+    >>> c = discrete_curvatures(*icosphere(3))
+    >>> round(float(c.H.mean()), 3), round(float(c.K.mean()), 3), c.kmin   # unit sphere: 1, 1
+    (1.0, 1.005, None)
+    """
 
     H: np.ndarray
     K: np.ndarray

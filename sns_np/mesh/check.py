@@ -36,7 +36,17 @@ DEGENERATE_TOL = 1e-12
 
 @dataclass(frozen=True)
 class MeshSummary:
-    """What :func:`check` measured on a valid mesh."""
+    """What :func:`check` measured on a valid mesh.
+
+    Examples
+    --------
+    >>> from sns_np.mesh import check, icosphere
+    >>> s = check(*icosphere(2))
+    >>> s.n_vertices, s.n_edges, s.n_faces, s.euler_characteristic
+    (162, 480, 320, 2)
+    >>> round(s.area, 3), round(s.volume, 3)               # 4 pi, 4 pi / 3 from below
+    (12.33, 4.047)
+    """
 
     n_vertices: int
     n_edges: int

@@ -104,6 +104,15 @@ class EmbeddingReport:
         ``stretch_p99`` of every candidate computed.
     time : float
         Wall-clock seconds.
+
+    Examples
+    --------
+    >>> from sns_np.mesh import spherical_embedding
+    >>> from sns_np.shapes import Ellipsoid
+    >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    >>> Vs, report = spherical_embedding(V, F)
+    >>> report.folds_after_repair, report.method in ("conformal", "stretch", "density", "tutte")
+    (0, True)
     """
 
     n_vertices: int

@@ -60,6 +60,22 @@ class FoldRepair:
     ----------
     V : (n, 3) float array, the surface (its angles give the Tutte weights)
     F : (m, 3) int array
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(2)
+    >>> P = V.copy()
+    >>> i, j = F[0, 0], F[0, 1]
+    >>> P[i] = 1.5 * V[j] - 0.5 * V[i]                # push vertex i past its neighbour j
+    >>> P[i] /= np.linalg.norm(P[i])
+    >>> repair = FoldRepair(V, F)
+    >>> int(repair.bad_faces(P).sum())                # folded triangles
+    2
+    >>> repair(P)                                     # (rounds, vertices moved); P is repaired
+    (0, 1)
+    >>> int(repair.bad_faces(P).sum())
+    0
     """
 
     def __init__(self, V, F):
@@ -155,7 +171,16 @@ class FoldRepair:
         return True
 
     def bad_faces(self, P, flatness: float = 0.0) -> np.ndarray:
-        """Faces folded or flatter than ``det[a, b, c] <= flatness * (longest edge)^2``."""
+        """Faces folded or flatter than ``det[a, b, c] <= flatness * (longest edge)^2``.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(1)
+        >>> repair = FoldRepair(V, F)
+        >>> int(repair.bad_faces(V).sum()), int(repair.bad_faces(V[:, [1, 0, 2]]).sum())  # mirrored
+        (0, 80)
+        """
         det = orientation_determinants(P, self.F)
         if flatness <= 0:
             return det <= 0
@@ -164,7 +189,16 @@ class FoldRepair:
         return det <= flatness * l2
 
     def bad_faces_subset(self, P, faces, flatness: float = 0.0) -> np.ndarray:
-        """:meth:`bad_faces` restricted to the given faces."""
+        """:meth:`bad_faces` restricted to the given faces.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(1)
+        >>> repair = FoldRepair(V, F)
+        >>> repair.bad_faces_subset(V[:, [1, 0, 2]], np.array([0, 5]))
+        array([ True,  True])
+        """
         Q = P[self.F[faces]]
         det = np.einsum("ij,ij->i", Q[:, 0], np.cross(Q[:, 1] - Q[:, 0], Q[:, 2] - Q[:, 0]))
         if flatness <= 0:

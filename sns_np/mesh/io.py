@@ -56,6 +56,19 @@ class LoadReport:
         area): no split of them is free of folded triangles, so they were split as a fan.
     self_crossing_example : str
         Where the first of them is in the file ("path: line 12"), or "".
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> from sns_np.mesh import load
+    >>> path = os.path.join(tempfile.mkdtemp(), "tetrahedron.obj")
+    >>> lines = ["v 0 0 0", "v 1 0 0", "v 0 1 0", "v 0 0 1", "v 0 0 1",   # one vertex twice
+    ...          "f 1 3 2", "f 1 2 4", "f 1 4 3", "f 2 3 5"]
+    >>> with open(path, "w") as fh:
+    ...     _ = fh.write(os.linesep.join(lines))
+    >>> V, F, report = load(path, return_report=True)
+    >>> report.n_vertices_read, report.n_vertices_merged, report.n_vertices, report.n_faces
+    (5, 1, 4, 4)
     """
 
     path: str
@@ -72,13 +85,28 @@ class LoadReport:
 
     def repaired(self, expected_merge: bool = False) -> bool:
         """True when vertices were merged (unless ``expected_merge``), anything was dropped, or
-        a self-crossing polygon was split (its triangles may fold)."""
+        a self-crossing polygon was split (its triangles may fold).
+
+        Examples
+        --------
+        >>> from sns_np.mesh.io import LoadReport
+        >>> r = LoadReport("m.obj", 5, 4, 0, 1, 0, 0, 4, 4)     # one coincident vertex merged
+        >>> r.repaired(), r.repaired(expected_merge=True)
+        (True, False)
+        """
         return bool((self.n_vertices_merged and not expected_merge)
                     or self.n_degenerate_faces_dropped or self.n_unreferenced_dropped
                     or self.n_polygons_self_crossing)
 
     def repairs(self) -> str:
-        """The repairs in words, e.g. ``"merged 1 vertex, dropped 2 unreferenced vertices"``."""
+        """The repairs in words, e.g. ``"merged 1 vertex, dropped 2 unreferenced vertices"``.
+
+        Examples
+        --------
+        >>> from sns_np.mesh.io import LoadReport
+        >>> LoadReport("m.obj", 6, 5, 0, 1, 1, 0, 4, 4).repairs()
+        'merged 1 coincident vertex, dropped 1 degenerate face'
+        """
         def count(n, what):
             return f"{n} {what}" if n == 1 else f"{n} " + what.replace("vertex", "vertice") + "s"
         parts = []

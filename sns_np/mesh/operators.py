@@ -61,7 +61,14 @@ def face_areas(V, F) -> np.ndarray:
 
 
 def surface_area(V, F) -> float:
-    """Total area of the mesh (sum of :func:`face_areas`)."""
+    """Total area of the mesh (sum of :func:`face_areas`).
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> round(surface_area(*icosphere(4)), 3)          # 4 pi = 12.566, approached from below
+    12.551
+    """
     return float(face_areas(V, F).sum())
 
 
@@ -114,6 +121,12 @@ def face_angles(V, F) -> np.ndarray:
     Returns
     -------
     alpha : (m, 3) float array
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    >>> np.degrees(face_angles(V, np.array([[0, 1, 2]]))).round(6)
+    array([[90., 45., 45.]])
     """
     V, F = as_mesh(V, F)
     P = V[F]

@@ -117,5 +117,12 @@ def laplacian_eigenmodes(V, F, k: int, *, mass: str = "full", return_vectors: bo
 
 
 def eigenvalues(V, F, k: int, *, mass: str = "full") -> np.ndarray:
-    """Shorthand for ``laplacian_eigenmodes(V, F, k, mass=mass)`` (eigenvalues only)."""
+    """Shorthand for ``laplacian_eigenmodes(V, F, k, mass=mass)`` (eigenvalues only).
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> eigenvalues(*icosphere(3), 3).round(2)          # unit sphere: 2, 2, 2
+    array([2.01, 2.01, 2.01])
+    """
     return laplacian_eigenmodes(V, F, k, mass=mass)

@@ -162,6 +162,15 @@ class SphereLocator:
 
         Coordinates sum to 1; all are >= 0 exactly when ``p`` lies in the triangle (for a point
         in the opposite hemisphere of the triangle they are returned as ``-inf``).
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(2)
+        >>> loc = SphereLocator(V, F)
+        >>> beta = loc.barycentric(V[F[[3]]][:, 0], np.array([3]))   # the first corner of face 3
+        >>> beta.round(6)
+        array([[1., 0., 0.]])
         """
         a, n = self._a[faces], self._n[faces]
         d = p - a
@@ -211,6 +220,16 @@ class SphereLocator:
         -------
         face : (q,) int array
         beta : (q, 3) float array, non-negative, rows sum to 1
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(2)
+        >>> p = np.random.default_rng(0).standard_normal((1000, 3))
+        >>> p /= np.linalg.norm(p, axis=1, keepdims=True)
+        >>> f, beta = SphereLocator(V, F).locate(p)
+        >>> f.shape, beta.shape, bool((beta >= 0).all()), bool(np.allclose(beta.sum(axis=1), 1))
+        ((1000,), (1000, 3), True, True)
         """
         p = as_sphere_points(p, "p")
         face, beta, m = self._search(p, k)

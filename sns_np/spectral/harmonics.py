@@ -40,12 +40,24 @@ __all__ = ["sh_index", "n_harmonics", "real_sh", "HarmonicField"]
 
 
 def sh_index(l: int, m: int) -> int:
-    """Column of ``Y_lm`` in :func:`real_sh`: ``l^2 + l + m``."""
+    """Column of ``Y_lm`` in :func:`real_sh`: ``l^2 + l + m``.
+
+    Examples
+    --------
+    >>> sh_index(0, 0), sh_index(1, -1), sh_index(1, 1), sh_index(2, 0)
+    (0, 1, 3, 6)
+    """
     return l * l + l + m
 
 
 def n_harmonics(L: int) -> int:
-    """Number of harmonics of degree ``<= L``: ``(L + 1)^2``."""
+    """Number of harmonics of degree ``<= L``: ``(L + 1)^2``.
+
+    Examples
+    --------
+    >>> n_harmonics(2), real_sh(np.array([[0.0, 0.0, 1.0]]), 2).shape
+    (9, (1, 9))
+    """
     return (L + 1) ** 2
 
 
@@ -214,14 +226,29 @@ class HarmonicField:
         self.coefficients, self.L, self.name = c, L, str(name)
 
     def jet(self, x, order: int = 0):
-        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) at ``x`` (n, 3)."""
+        """Value (n,), gradient (n, 3) and Hessian (n, 3, 3) at ``x`` (n, 3).
+
+        Examples
+        --------
+        >>> from sns_np.testing import check_jet
+        >>> f = HarmonicField(np.random.default_rng(0).standard_normal(9))     # degree <= 2
+        >>> bool(max(check_jet(f, np.array([[0.6, 0.0, 0.8]])).values()) < 1e-7)
+        True
+        """
         out = evaluate_expansions(x, self.coefficients[:, None], order)
         if order == 0:
             return out[:, 0]
         return tuple(a[:, 0] for a in out)
 
     def __call__(self, x) -> np.ndarray:
-        """The value at ``x`` (n, 3), (n,)."""
+        """The value at ``x`` (n, 3), (n,).
+
+        Examples
+        --------
+        >>> f = HarmonicField(np.r_[np.sqrt(4 * np.pi), 0.0, 0.0, 0.0])   # the constant 1
+        >>> f(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])), f.value(np.array([[0.0, 1.0, 0.0]]))
+        (array([1., 1.]), array([1.]))
+        """
         return self.jet(x, 0)
 
     value = __call__

@@ -69,7 +69,19 @@ class EigenResult:
         return self.k
 
     def evaluate(self, p) -> np.ndarray:
-        """All eigenfunctions at sphere points ``p`` (n, 3), as an (n, k) array."""
+        """All eigenfunctions at sphere points ``p`` (n, 3), as an (n, k) array.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> from sns_np.spectral import eigenmodes
+        >>> res = eigenmodes(Sphere(), 3, L=2)
+        >>> phi = res.evaluate(np.eye(3))                 # the modes at the three axis points
+        >>> phi.shape                   # an orthonormal basis of the l = 1 eigenspace, so that
+        (3, 3)
+        >>> bool(np.allclose((phi ** 2).sum(axis=1), 3 / (4 * np.pi)))   # sum phi_i^2 = 3 / (4 pi)
+        True
+        """
         p = as_points(p, "p")
         if self.evaluator is not None:
             return self.evaluator(p)
@@ -79,6 +91,18 @@ class EigenResult:
     __call__ = evaluate
 
     def summary(self) -> str:
+        """The eigenvalues and convergence in a few lines of text.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> from sns_np.spectral import eigenmodes
+        >>> print(eigenmodes(Sphere(), 3, L=4).summary())
+        ritz eigenmodes: k = 3, area 12.5664, ... s, converged True (indicator ...)
+          lambda_1   = 2
+          lambda_2   = 2
+          lambda_3   = 2
+        """
         lines = [f"{self.method} eigenmodes: k = {self.k}, area {self.area:.6g}, "
                  f"{self.seconds:.1f} s, converged {self.converged} "
                  f"(indicator {self.convergence:.2e})"]

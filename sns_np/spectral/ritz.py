@@ -50,7 +50,13 @@ CHUNK = 2048
 
 
 def default_degree(k: int) -> int:
-    """Starting degree for ``k`` modes: about twice the degree of mode ``k`` on a sphere."""
+    """Starting degree for ``k`` modes: about twice the degree of mode ``k`` on a sphere.
+
+    Examples
+    --------
+    >>> default_degree(1), default_degree(10), default_degree(50)
+    (5, 9, 17)
+    """
     return max(4, int(math.ceil(2.0 * math.sqrt(k + 1))) + 2)
 
 

@@ -75,6 +75,15 @@ class SphericalNeuralSurface:
         """Value and ambient derivatives of S = c + s net, in the input's units.
 
         Parameters and returns as :meth:`ResidualMLP.jet` (surface-map protocol), in float64.
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+        >>> p = np.array([[0.0, 0.0, 1.0]])
+        >>> y, J = S.jet(p, 1)
+        >>> bool(np.allclose(y, 2.0 * S.net(p))), bool(np.allclose(J, 2.0 * S.net.jet(p, 1)[1]))
+        (True, True)
         """
         order = check_order(order)
         p = as_points(p, "p")
@@ -102,19 +111,48 @@ class SphericalNeuralSurface:
     # ------------------------------------------------------------------ construction
     @classmethod
     def fit(cls, V, F, **options):
-        """Fit a surface to a closed genus-0 triangle mesh; see :func:`sns_np.surface.fit_mesh`."""
+        """Fit a surface to a closed genus-0 triangle mesh; see :func:`sns_np.surface.fit_mesh`.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Ellipsoid
+        >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+        >>> S, report = SphericalNeuralSurface.fit(V, F, width=16, depth=1, steps=30, batch=256,
+        ...                                        progress=False)
+        >>> S.n_params, report.steps
+        (608, 30)
+        """
         from .fit import fit_mesh
         return fit_mesh(V, F, **options)
 
     @classmethod
     def fit_shape(cls, shape, **options):
-        """Fit a surface to an analytic surface map; see :func:`sns_np.surface.fit_shape`."""
+        """Fit a surface to an analytic surface map; see :func:`sns_np.surface.fit_shape`.
+
+        Examples
+        --------
+        >>> from sns_np.shapes import Sphere
+        >>> S, report = SphericalNeuralSurface.fit_shape(Sphere(2.0), width=16, depth=1, steps=200,
+        ...                                              batch=256, progress=False)
+        >>> r = np.linalg.norm(S(np.array([[0.0, 0.0, 1.0]])), axis=1)
+        >>> bool(abs(r[0] - 2.0) < 0.1)
+        True
+        """
         from .fit import fit_shape
         return fit_shape(shape, **options)
 
     @classmethod
     def fit_sdf(cls, sdf, **options):
-        """Fit a surface to the zero set of a signed distance function (sns_np.flows)."""
+        """Fit a surface to the zero set of a signed distance function (sns_np.flows).
+
+        Examples
+        --------
+        >>> S, report = SphericalNeuralSurface.fit_sdf(lambda x: np.linalg.norm(x, axis=1) - 1.0,
+        ...                                            width=16, depth=1, steps=60, iterations=1,
+        ...                                            n_pool=2048, n_eval=512, progress=False)
+        >>> bool(report.relative_mean < 0.02)
+        True
+        """
         from ..flows import fit_sdf
         return fit_sdf(sdf, **options)
 
@@ -169,6 +207,17 @@ class SphericalNeuralSurface:
 
     # ------------------------------------------------------------------ files
     def state(self) -> dict:
+        """The arrays that describe the surface: format, version, centre, scale, metadata (JSON) and
+        the network's :meth:`~sns_np.nn.ResidualMLP.state` under ``net.``.
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+        >>> state = S.state()
+        >>> str(state["format"]), float(state["scale"]), state["net.theta"].shape
+        ('sns_np.SphericalNeuralSurface', 2.0, (176,))
+        """
         out = {
             "format": np.array(FORMAT), "format_version": np.array(FORMAT_VERSION),
             "center": self.center, "scale": np.array(self.scale),
@@ -180,7 +229,22 @@ class SphericalNeuralSurface:
     @classmethod
     def from_state(cls, data, source="state"):
         """Rebuild a surface from :meth:`state` arrays (or an open file), checking every field;
-        any problem is a :class:`ModelFileError` naming ``source`` and the field."""
+        any problem is a :class:`ModelFileError` naming ``source`` and the field.
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+        >>> again = SphericalNeuralSurface.from_state(S.state())
+        >>> again.scale, bool(np.array_equal(again.net.theta, S.net.theta))
+        (2.0, True)
+        >>> state = S.state()
+        >>> state["scale"] = np.array(-1.0)
+        >>> SphericalNeuralSurface.from_state(state, source="crafted.npz")
+        Traceback (most recent call last):
+            ...
+        sns_np.errors.ModelFileError: crafted.npz: invalid transform or metadata (scale ...
+        """
         if "format" not in data:
             raise ModelFileError(f"{source}: missing field 'format'; not an sns_np model file")
         fmt = _npz.field(data, "format", source, kinds="U", what="text")
@@ -205,7 +269,18 @@ class SphericalNeuralSurface:
             raise ModelFileError(f"{source}: invalid transform or metadata ({exc})") from None
 
     def save(self, path):
-        """Write the model to ``path`` (.npz, no pickles), atomically."""
+        """Write the model to ``path`` (.npz, no pickles), atomically.
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+        >>> S.metadata["source"] = "example"
+        >>> S.save("surface.npz").name
+        'surface.npz'
+        >>> SphericalNeuralSurface.load("surface.npz").metadata
+        {'source': 'example'}
+        """
         return save_npz(path, self.state())
 
     @classmethod
@@ -215,6 +290,20 @@ class SphericalNeuralSurface:
         The cost of refusing a crafted file is bounded (sns_np/_npz.py): sizes are checked
         before anything is allocated. Every problem is a :class:`ModelFileError` naming the
         file and the field.
+
+        Examples
+        --------
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0), scale=2.0)
+        >>> path = S.save("surface.npz")
+        >>> SphericalNeuralSurface.load(path)
+        SphericalNeuralSurface(width=8, depth=1, scale=2)
+        >>> with open("broken.npz", "wb") as fh:
+        ...     _ = fh.write(b"not a zip archive")
+        >>> SphericalNeuralSurface.load("broken.npz")
+        Traceback (most recent call last):
+            ...
+        sns_np.errors.ModelFileError: broken.npz: not a readable .npz model file (not a zip archive)
         """
         try:
             with load_npz(path) as data:
