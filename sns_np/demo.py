@@ -62,8 +62,8 @@ def ellipsoid_foot_point(x, axes=AXES, iterations=100):
 def ellipsoid_geometry(y, axes=AXES):
     """Closed-form outward normal, mean and Gaussian curvature at points y (n, 3) on the ellipsoid.
 
-    With h = |(y_i / a_i^2)|:  n = (y_i / a_i^2) / h,  K = 1 / ((abc)^2 h^4),
-    H = (a^2 + b^2 + c^2 - |y|^2) / (2 (abc)^2 h^3)  (positive: convex, outward normals).
+    With ``h = |(y_i / a_i^2)|``: ``n = (y_i / a_i^2) / h``, ``K = 1 / ((abc)^2 h^4)``,
+    ``H = (a^2 + b^2 + c^2 - |y|^2) / (2 (abc)^2 h^3)`` (positive: convex, outward normals).
 
     Examples
     --------

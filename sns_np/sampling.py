@@ -443,9 +443,10 @@ def rejection_sample(surface, n_target: int, rng=None, *, oversample: float = 10
 
     Returns
     -------
-    SurfaceSample with ``kind="rejection"``, equal weights ``area / N`` where ``area =
-    4 pi mean(d_j)`` is estimated from all ``M`` proposals (``area_stderr`` its standard
-    error) and ``N`` is the number of accepted points.
+    SurfaceSample
+        With ``kind="rejection"``, equal weights ``area / N`` where
+        ``area = 4 pi mean(d_j)`` is estimated from all ``M`` proposals (``area_stderr`` its
+        standard error) and ``N`` is the number of accepted points.
 
     Raises
     ------

@@ -1,7 +1,7 @@
 """Derivative checks by central differences, used by the test-suite of every module.
 
 Each check compares an analytic derivative with a central difference of the quantity one order
-lower, in float64, and returns the relative error
+lower, in float64, and returns the relative error::
 
     err = max |analytic - numeric| / max(max |numeric|, floor)
 
@@ -29,7 +29,7 @@ __all__ = ["relative_error", "central_difference", "check_jet", "check_direction
 
 
 def relative_error(analytic, numeric, floor: float = 1e-12) -> float:
-    """max |analytic - numeric| / max(max |numeric|, floor).
+    """``max |analytic - numeric| / max(max |numeric|, floor)``.
 
     Examples
     --------

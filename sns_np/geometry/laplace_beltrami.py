@@ -67,7 +67,7 @@ def laplace_beltrami_divgrad_from_jets(f_a, f_ab, JR, S2):
     """``div_S grad_S h`` from chart derivatives of the field and of the map.
 
     With ``X_a = JR[:, :, a]``, ``X_ab = S2[:, :, a, b]``, ``w = I^-1 f_a`` (so
-    ``V = grad_S h = X_c w_c``):
+    ``V = grad_S h = X_c w_c``)::
 
         d_a I_cd = X_ac . X_d + X_c . X_ad,        d_a w = I^-1 (f_.a - (d_a I) w),
         d_a V = X_ac w_c + X_c (d_a w)_c,          Delta_S h = X^a . d_a V.

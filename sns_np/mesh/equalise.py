@@ -149,7 +149,7 @@ def equalise_areas(V, F, Vs, *, strength: float = 1.0, grid_level: int = 5,
     -------
     Vs : (n, 3) float array, unit vectors, fold-free
     info : dict
-        ``steps``, ``time`` (diffusion time reached), ``density_range`` (final max |rho - 1|).
+        ``steps``, ``time`` (diffusion time reached), ``density_range`` (final ``max |rho - 1|``).
 
     References
     ----------
