@@ -4,8 +4,15 @@ Plain functions of arrays and scalars: no validation, no classes (the Python lay
 :mod:`sns_np.nn.mlp` validates, allocates and picks the kernel). Every kernel writes into
 preallocated arrays. The fused jet rules exist twice over one row-range body
 (``_softplus_jet_rows``, ``_softplus_jet_back_rows``): threaded (``prange`` over blocks of
-points) for the threaded path, and serial without the GIL (``*_serial``) for the worker
-threads of :mod:`sns_np.nn._parallel`, which run one whole chunk each.
+points) for the threaded path, and serial without the GIL (``*_serial``, Python shims that
+call the row kernels on the whole chunk) for the worker threads of :mod:`sns_np.nn._parallel`,
+which run one whole chunk each.
+
+First-call cost: every jitted function is compiled (or loaded from the cache) on its first
+call, and a jitted wrapper around another jitted function costs a compilation of its own in
+which LLVM optimises the inlined body again. So the serial entry points are Python shims, and
+the scalar helpers ``_exp_parts`` and ``_softplus_sigmoid`` are inlined at the Numba IR level
+(``inline="always"``) instead of compiled separately (docs/performance.md, "First call").
 
 Stream layout
 -------------
@@ -53,7 +60,7 @@ _SJIT = dict(_JIT, nogil=True)  # serial kernels that worker threads run side by
 _NBLK = 64
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _exp_parts(z, p, ib):
     """p[j] * 2^n[j] = exp(-|z[j]|): the mantissa polynomial in p, the 2^n bits in ib."""
     for j in range(z.shape[0]):
@@ -67,7 +74,7 @@ def _exp_parts(z, p, ib):
         ib[j] = np.int64(n + 1023.0) << 52
 
 
-@njit(**_JIT)
+@njit(inline="always", **_JIT)
 def _softplus_sigmoid(z, p, fb, a, sig, s2):
     """a = softplus(z), sig = sigmoid(z), s2 = sig (1 - sig), from the parts of exp(-|z|)."""
     for j in range(z.shape[0]):
@@ -166,9 +173,13 @@ def softplus_jet(Z, R, bias, out, sig, m, k, has_res, has_bias):
                            (c * t) // nblk, (c * (t + 1)) // nblk)
 
 
-@njit(**_SJIT)
 def softplus_jet_serial(Z, R, bias, out, sig, m, k, has_res, has_bias):
-    """:func:`_softplus_jet_rows` on a whole chunk in the calling thread, without the GIL."""
+    """:func:`_softplus_jet_rows` on a whole chunk in the calling thread, without the GIL.
+
+    A Python shim, not a kernel of its own: a jitted wrapper would be one more compilation
+    (LLVM optimises the inlined rows body again), 0.3-0.5 s of the first call (First call,
+    docs/performance.md).
+    """
     _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, 0, Z.shape[0])
 
 
@@ -205,9 +216,9 @@ def softplus_jet_back(Z, sig, Abar, Zbar, m):
         _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, (c * t) // nblk, (c * (t + 1)) // nblk)
 
 
-@njit(**_SJIT)
 def softplus_jet_back_serial(Z, sig, Abar, Zbar, m):
-    """:func:`_softplus_jet_back_rows` on a whole chunk in the calling thread, without the GIL."""
+    """:func:`_softplus_jet_back_rows` on a whole chunk in the calling thread, without the GIL
+    (a Python shim, as :func:`softplus_jet_serial`)."""
     _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, 0, Z.shape[0])
 
 
