@@ -2,7 +2,8 @@
 
 * ``test_doctest`` runs the ``Examples`` of every docstring of the package (each docstring
   is one test case), so that ``python -m pytest -q tests``, the README's test command and
-  CI's, checks them. Examples use tiny networks and budgets: the whole set takes seconds.
+  CI's, checks them. Examples use tiny networks and budgets: the whole set takes about 20 s
+  (``tox -e nojit`` leaves them out: without the JIT their small fits take minutes).
 * ``test_every_public_definition_has_an_example`` lists the public definitions (the names in
   each public module's ``__all__`` and the public methods of those classes) whose numpydoc
   docstring has no ``Examples`` section, and fails if there is any.
@@ -124,6 +125,7 @@ def test_the_doctests_were_found():
     assert len(DOCTESTS) > 150
 
 
+@pytest.mark.slow_nojit           # tiny fits: seconds with the JIT, minutes without
 @pytest.mark.parametrize("test", DOCTESTS, ids=[t.name for t in DOCTESTS])
 def test_doctest(test, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)                             # examples that write files
