@@ -46,11 +46,9 @@ def write_mesh(path, V, F, point_data=None, binary=True):
 
     Examples
     --------
-    >>> import os, tempfile
     >>> from sns_np.mesh import icosphere, write_mesh
     >>> V, F = icosphere(1)
-    >>> out = os.path.join(tempfile.mkdtemp(), "sphere.ply")
-    >>> write_mesh(out, V, F, {"height": V[:, 2]}).name
+    >>> write_mesh("sphere.ply", V, F, {"height": V[:, 2]}).name    # in the current folder
     'sphere.ply'
     """
     import meshio

@@ -59,9 +59,9 @@ class LoadReport:
 
     Examples
     --------
-    >>> import os, tempfile
+    >>> import os
     >>> from sns_np.mesh import load
-    >>> path = os.path.join(tempfile.mkdtemp(), "tetrahedron.obj")
+    >>> path = "tetrahedron.obj"                           # in the current folder
     >>> lines = ["v 0 0 0", "v 1 0 0", "v 0 1 0", "v 0 0 1", "v 0 0 1",   # one vertex twice
     ...          "f 1 3 2", "f 1 2 4", "f 1 4 3", "f 2 3 5"]
     >>> with open(path, "w") as fh:
