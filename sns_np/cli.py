@@ -46,21 +46,26 @@ def _positive_float(text):
 
 def _add_fit_options(p):
     g = p.add_argument_group("fitting options (defaults: docs/fitting.md)")
-    g.add_argument("--steps", type=_positive_int, help="step budget (default 800)")
+    g.add_argument("--steps", type=_positive_int,
+                   help="step budget (default: as many as fit the time budget)")
     g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
-                   help="stop after this many seconds")
+                   help="seconds of fitting (default: chosen from the mesh's detail, "
+                        "200 s in all for a smooth mesh, 540 s for a detailed one)")
     g.add_argument("--tol", type=_positive_float,
                    help="stop when the running RMS position error (relative to the "
                         "normalised size) is below this")
     g.add_argument("--width", type=_positive_int, help="network width (default 256)")
     g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
     g.add_argument("--batch", type=_positive_int, help="samples per step (default 2048)")
-    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 1e-4)")
+    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 2e-3)")
     g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
     g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
     g.add_argument("--input-scale", type=_positive_float,
-                   help="scale of the first layer's initial weights (default 4; larger for "
-                        "detailed meshes, docs/fitting.md)")
+                   help="scale of the first layer's initial weights (default: chosen from "
+                        "the mesh's detail, 4 or 40; docs/fitting.md)")
+    g.add_argument("--smooth", choices=["phong", "none"],
+                   help="position targets on the Phong-tessellated mesh (default) or on its "
+                        "flat triangles")
     g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
     g.add_argument("--seed", type=int, help="random seed (default 0)")
 
@@ -83,7 +88,7 @@ def _add_flow_options(p, points_help):
 
 def _fit_kwargs(args):
     keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-            "normal_weight", "input_scale", "dtype", "seed")
+            "normal_weight", "input_scale", "dtype", "seed", "smooth")
     return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
 
 
@@ -258,22 +263,22 @@ def _cmd_fit(args):
                                progress=not args.quiet, source=str(Path(args.mesh).resolve()),
                                **_fit_kwargs(args))
     surface.save(out)
+    for line in _choice_lines(report.choices):
+        print(line)
     print(report.summary())
-    hint = _input_scale_hint(report)
-    if hint:
-        print(hint)
     print(f"wrote {out} (checkpoint {ckpt})")
     return 0
 
 
-def _input_scale_hint(report):
-    """A line of advice when a fit of a detailed mesh ran with a small first-layer scale."""
-    scale = report.options.get("input_scale")
-    if report.normal_mean_deg > 5.0 and scale is not None and scale < 20:
-        return (f"hint: the held-out normal error is {report.normal_mean_deg:.1f} deg; detailed "
-                f"meshes fit far better with --input-scale 40 (spot: 13.6 -> 1.9 deg at 800 "
-                f"steps; docs/fitting.md)")
-    return None
+def _choice_lines(choices):
+    """One line per option that the fit chose by itself, with the reason."""
+    out = []
+    for k, c in (choices or {}).items():
+        if isinstance(c, dict):
+            v = c.get("value")
+            v = f"{v:.3g}" if isinstance(v, float) else v
+            out.append(f"  chosen {_printable(k)} = {_printable(v)} ({_printable(c.get('why'))})")
+    return out
 
 
 def _cmd_eval(args):
@@ -310,7 +315,12 @@ def _cmd_info(args):
               f"{fit.get('normal_mean_deg'):.3f} deg")
         opts = fit.get("options", {})
         if opts:
-            print(f"  fit options: {json.dumps(opts)}")
+            print(f"  fit options: {_printable(json.dumps(opts))}")
+        for line in _choice_lines(fit.get("choices")):
+            print(" " + line)
+        notes = fit.get("notes")
+        for n in notes if isinstance(notes, list) else []:
+            print(f"  note: {_printable(n)}")
     return 0
 
 

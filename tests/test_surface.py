@@ -6,12 +6,14 @@ import pytest
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
 from sns_np.shapes import Ellipsoid
-from sns_np.surface import SphericalNeuralSurface, fit_shape, position_normal_loss
+from sns_np.surface import SphericalNeuralSurface, fit_mesh, fit_shape, position_normal_loss
 from sns_np.testing import check_directional_jet, check_jet
 
 from .conftest import sphere_points
 
-TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False, normal_weight=1e-4)
+# the options these tests were written for (the fitting defaults adapt to the target)
+TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False, normal_weight=1e-4,
+            lr=1e-4, input_scale=4.0)
 
 
 def make_surface(seed=0):
@@ -78,7 +80,7 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     E = Ellipsoid(2.0, 2.6, 1.4)  # twice the size of the ellipsoid: units matter
     _, r_random = fit_shape(E, steps=1, init="random", **TINY)
     _, r_ridge = fit_shape(E, steps=1, **dict(TINY, width=24, depth=2))
-    S, r = fit_shape(E, steps=300, lr=3e-3, **dict(TINY, width=24, depth=2))
+    S, r = fit_shape(E, steps=300, **dict(TINY, width=24, depth=2, lr=3e-3))
     assert r_ridge.position_mean < 0.1 * r_random.position_mean  # the warm start helps
     assert r.steps == 300 and r.stopped == "step budget"
     assert r.position_mean < 0.6 * r_ridge.position_mean        # and training improves on it
@@ -91,8 +93,9 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
 @pytest.mark.slow_nojit
 def test_time_budget_tolerance_and_callback_stop():
     E = Ellipsoid(1.0, 1.3, 0.7)
-    _, r = fit_shape(E, steps=10_000, time_budget=0.5, **TINY)
-    assert r.stopped == "time budget" and r.steps < 10_000
+    _, r = fit_shape(E, time_budget=0.5, **TINY)          # no step count: sized by the clock
+    assert r.stopped == "time budget" and r.steps > 20
+    assert r.choices["steps"]["value"] == r.steps and r.options["steps"] is None
     _, r = fit_shape(E, steps=10_000, tol=1.0, **TINY)
     assert r.stopped == "tolerance" and r.steps == 20
     _, r = fit_shape(E, steps=10_000, callback=lambda step, info: step >= 100, **TINY)
@@ -133,6 +136,85 @@ def test_divergence_stops_with_message():
 
     with pytest.raises(DivergenceError, match="diverged at step 10"):
         fit_shape(E, steps=50, callback=poison, history_every=10, **TINY)
+
+
+def test_tangent_weighted_position_loss_by_differences():
+    g = np.random.default_rng(1)
+    y, JD = g.standard_normal((6, 3)), g.standard_normal((6, 3, 2))
+    q, nt = g.standard_normal((6, 3)), g.standard_normal((6, 3))
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+
+    def f(y_):
+        return position_normal_loss(y_, JD, q, nt, 6, 0.0, tangent_weight=0.2)[0]
+
+    val, dy, _, _ = position_normal_loss(y, JD, q, nt, 6, 0.0, tangent_weight=0.2)
+    r = y - q
+    rn = np.einsum("ij,ij->i", r, nt)
+    # (r.n)^2 + 0.2 |r - (r.n) n|^2, by its definition
+    assert np.isclose(val, np.mean(rn ** 2 + 0.2 * (np.sum(r * r, axis=1) - rn ** 2)))
+    h = 1e-6
+    for idx in np.ndindex(*y.shape):
+        e = np.zeros_like(y)
+        e[idx] = h
+        assert np.isclose((f(y + e) - f(y - e)) / (2 * h), dy[idx], atol=1e-8)
+
+
+def test_phong_points_interpolate_and_lift_towards_the_sphere():
+    from sns_np.mesh import Correspondence, icosphere
+    V, F = icosphere(2)
+    C = Correspondence(V, F, V)
+    face, beta = C.sample_barycentric(4000, rng=0)
+    flat, _ = C.to_mesh(face, beta)
+    phong = C.phong_point(face, beta)
+    corners = np.eye(3)
+    for k in range(3):                                   # the corners are kept
+        fk = np.arange(len(F))
+        assert np.allclose(C.phong_point(fk, np.repeat(corners[k:k + 1], len(F), 0)), V[F[:, k]])
+    # on an icosphere (vertex normals = radial), Phong points lie much closer to the sphere
+    err_flat = np.abs(np.linalg.norm(flat, axis=1) - 1).mean()
+    err_phong = np.abs(np.linalg.norm(phong, axis=1) - 1).mean()
+    assert err_phong < 0.6 * err_flat                    # measured: 0.46
+
+
+def test_gauss_newton_readout_lowers_the_loss():
+    from sns_np.surface.fit import _gauss_newton_readout, _ridge_readout, _ShapeTarget
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    target = _ShapeTarget(E)
+    net = ResidualMLP(width=16, depth=1, seed=0, input_scale=4.0)
+    rng = np.random.default_rng(0)
+    _ridge_readout(net, target, rng)
+    before = _gauss_newton_readout(net, target, np.random.default_rng(5), 1.0, iters=0)
+    after = _gauss_newton_readout(net, target, np.random.default_rng(5), 1.0, iters=3)
+    assert after < 0.9 * before
+
+
+def test_auto_choices_follow_the_detail_and_are_recorded():
+    from sns_np.shapes import Bobble
+    from sns_np.surface.fit import AUTO, detail, _ShapeTarget
+    smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
+    assert smooth < 5e-3 < 2e-2 < bumpy
+    opts = dict(TINY, steps=3)
+    del opts["input_scale"], opts["lr"]
+    S, r = fit_shape(Bobble(), **opts)
+    assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
+    assert r.options["lr"] == AUTO["detailed"]["lr"]
+    assert set(r.choices) == {"detail", "input_scale", "lr"}
+    assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
+    S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
+    assert r.options["input_scale"] == AUTO["smooth"]["input_scale"]
+    # a budget too short for the goals says so
+    assert any("too short" in n for n in r.notes) and "too short" in r.summary()
+
+
+def test_options_refused_before_any_work():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    V, F = E.mesh(1)
+    with pytest.raises(TypeError, match="unknown fitting option.*'widht'"):
+        fit_mesh(V, F, widht=12, Vs="not an embedding")    # before the embedding is used
+    with pytest.raises(ValueError, match="cannot be reached in time_budget"):
+        fit_shape(E, steps=10 ** 7, time_budget=0.5, **TINY)
+    with pytest.raises(ValueError, match="smooth"):
+        fit_mesh(V, F, smooth="loop")
 
 
 def test_bad_options():

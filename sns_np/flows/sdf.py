@@ -270,7 +270,10 @@ def fit_sdf(sdf, grad=None, *, init="radial", center=(0.0, 0.0, 0.0), radius_max
         fit_options.pop(bad, None)
     F = _SDF(sdf, grad, 1.0)
     fit_options.setdefault("n_eval", 1024)  # the report below measures on its own points
-    common = dict(seed=rng, progress=progress, **fit_options)
+    # the options the SDF fits were measured with (docs/flows.md), not the mesh-fitting
+    # defaults, which adapt the first layer and the rate to detailed meshes
+    common = dict(seed=rng, progress=progress, **{"lr": 1e-4, "input_scale": 4.0,
+                                                  **fit_options})
 
     # ------------------------------------------------------------------ the start
     if isinstance(init, str):

@@ -165,6 +165,37 @@ class Correspondence:
         X = self._combine(self._corners, face, beta)
         return X[:, 0:3], self._unit(X[:, 6:9])
 
+    def phong_point(self, face, beta, alpha: float = 0.75) -> np.ndarray:
+        """Points ``(k, 3)`` of the Phong-tessellated surface at barycentric points.
+
+        The flat point ``q = sum_i beta_i v_i`` is projected onto the tangent plane of each
+        corner (``pi_i(q) = q - ((q - v_i) . n_i) n_i``, with the corners' vertex normals) and
+        the projections are blended with the same weights:
+        ``q* = (1 - alpha) q + alpha sum_i beta_i pi_i(q)`` (Boubekeur and Alexa, "Phong
+        Tessellation", SIGGRAPH Asia 2008). The result interpolates the vertices, is tangent
+        there to the vertex normals and bulges between them like the surface the mesh samples:
+        on an icosphere of level 2 its mean distance to the sphere is 0.46 of the flat
+        triangles' (tests/test_surface.py). The flat triangles' chordal error is what a network
+        fitted to them reproduces as curvature along the edges.
+        """
+        C = self._corners[face]
+        q = (beta[:, 0, None] * C[:, 0, 0:3] + beta[:, 1, None] * C[:, 1, 0:3]
+             + beta[:, 2, None] * C[:, 2, 0:3])
+        corr = np.zeros_like(q)
+        for i in range(3):
+            n = C[:, i, 6:9]
+            h = np.einsum("ij,ij->i", q - C[:, i, 0:3], n)
+            corr -= (beta[:, i] * h)[:, None] * n
+        return q + alpha * corr
+
+    def sample_barycentric(self, n: int, rng=None):
+        """Faces ``(n,)`` and barycentric coordinates ``(n, 3)`` of ``n`` points uniform by
+        area on the mesh (the draw that :meth:`sample` makes)."""
+        n = check_positive_int(n, "n", minimum=0)
+        g = as_generator(rng)
+        face = _draw(self._cum, n, g)
+        return face, uniform_barycentric(n, g)
+
     def sample(self, n: int, rng=None):
         """Draw ``n`` points uniformly by area on the mesh, with their sphere points.
 

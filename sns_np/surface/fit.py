@@ -36,9 +36,10 @@ __all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "DEFAULTS"]
 
 #: default fitting options (docs/fitting.md explains and measures each choice)
 DEFAULTS = dict(
-    width=256, depth=8, steps=800, batch=2048, lr=1e-4, lr_min=1e-5, optimizer="adam",
+    width=256, depth=8, steps=None, batch=2048, lr=None, lr_min=1e-5, optimizer="adam",
     schedule="cosine", warmup=50, normal_weight=1.0, dtype="float32", init="ridge",
-    input_scale=4.0,
+    input_scale=None, tangent_weight=1.0, readout_every=0,
+    readout="gn",
     time_budget=None, tol=None, n_eval=20000, seed=0,
 )
 
@@ -61,6 +62,29 @@ class FitReport:
     normal_max_deg: float = float("nan")
     history: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
+    #: what the options left to "auto" became, and why (option -> {"value", "why"})
+    choices: dict = field(default_factory=dict)
+    #: plain-language remarks on the result (for instance a budget too short for the goals)
+    notes: list = field(default_factory=list)
+
+    #: fidelity goals (held-out, against the target): normal angle in degrees and the mean
+    #: position error relative to the bounding-box diagonal
+    GOALS = {"normal_mean_deg": 1.5, "position_relative": 1e-3}
+
+    def add_quality_notes(self):
+        """Note the goals a fit missed, and whether its budget is what limited it."""
+        missed = []
+        if self.normal_mean_deg > self.GOALS["normal_mean_deg"]:
+            missed.append(f"normal error {self.normal_mean_deg:.2f} deg > "
+                          f"{self.GOALS['normal_mean_deg']} deg")
+        if self.position_relative > self.GOALS["position_relative"]:
+            missed.append(f"position error {self.position_relative:.2e} > "
+                          f"{self.GOALS['position_relative']:g} of the diagonal")
+        if missed and self.stopped in ("step budget", "time budget"):
+            self.notes.append(f"the {self.stopped} ({self.steps} steps, {self.seconds:.0f} s) "
+                              f"was too short to reach the fidelity goals: "
+                              f"{'; '.join(missed)}; a longer time_budget keeps improving it")
+        return self
 
     @property
     def position_relative(self) -> float:
@@ -71,7 +95,7 @@ class FitReport:
                 f"position error mean {self.position_mean:.3g} (= {self.position_relative:.2e}"
                 f" of the bbox diagonal), RMS {self.position_rms:.3g}, max "
                 f"{self.position_max:.3g}; normal error mean {self.normal_mean_deg:.3f} deg, max "
-                f"{self.normal_max_deg:.2f} deg")
+                f"{self.normal_max_deg:.2f} deg" + "".join(f"\nnote: {n}" for n in self.notes))
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -85,7 +109,7 @@ class FitReport:
 class _MeshTarget:
     """Samples of a mesh and its spherical embedding, in the normalised frame."""
 
-    def __init__(self, V, F, Vs=None, check=True, verbose=True):
+    def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong"):
         from .. import mesh as M
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F)
@@ -100,14 +124,20 @@ class _MeshTarget:
         self.scale = float(np.sqrt(self.area / (4 * np.pi)))
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
+        self.smooth = smooth
+
+    def _targets(self, face, beta):
+        q, nrm = self.corr.to_mesh(face, beta)
+        if self.smooth == "phong":
+            q = self.corr.phong_point(face, beta)
+        return (q - self.center) / self.scale, nrm
 
     def sample(self, n, rng):
-        p, q, nrm = self.corr.sample(n, rng)
-        return p, (q - self.center) / self.scale, nrm
+        face, beta = self.corr.sample_barycentric(n, rng)
+        return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
 
     def evaluate_at(self, p):
-        q, nrm = self.corr.mesh_point(p)
-        return (q - self.center) / self.scale, nrm
+        return self._targets(*self.corr.locate(p))
 
 
 class _ShapeTarget:
@@ -150,7 +180,7 @@ def _fingerprint(V, F):
 
 # ------------------------------------------------------------------------------ public API
 
-def fit_mesh(V, F, *, Vs=None, check=True, **options):
+def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
     """Fit a SphericalNeuralSurface to a closed genus-0 triangle mesh.
 
     Parameters
@@ -170,10 +200,15 @@ def fit_mesh(V, F, *, Vs=None, check=True, **options):
     surface : SphericalNeuralSurface, in the mesh's units, float64
     report : FitReport (held-out errors against the mesh)
     """
-    target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True))
+    check_choice(smooth, "smooth", {"phong", "none"})
+    _check_early(options)
+    t0 = time.perf_counter()
+    target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
+                         smooth=smooth)
     meta = {"source": options.pop("source", "mesh"), "n_vertices": int(len(V)),
-            "n_faces": int(len(F)), "area": target.area}
-    return fit_sampler(target, metadata=meta, **options)
+            "n_faces": int(len(F)), "area": target.area, "smooth": smooth}
+    return fit_sampler(target, metadata=meta, elapsed_before=time.perf_counter() - t0,
+                       **options)
 
 
 def fit_shape(shape, **options):
@@ -182,6 +217,7 @@ def fit_shape(shape, **options):
     Sphere points are drawn uniformly; targets are ``shape(p)`` and its exact normals.
     Options as :func:`fit_sampler`. Returns (surface, report).
     """
+    _check_early(options)
     target = _ShapeTarget(shape)
     meta = {"source": options.pop("source", f"shape:{type(shape).__name__}"),
             "area": target.area}
@@ -191,7 +227,8 @@ def fit_shape(shape, **options):
 def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, steps=None,
                 batch=None, lr=None, lr_min=None, optimizer=None, schedule=None, warmup=None,
                 normal_weight=None, dtype=None, init=None, input_scale=None, time_budget=None,
-                tol=None,
+                tol=None, tangent_weight=None, readout_every=None,
+                readout=None, elapsed_before=0.0,
                 n_eval=None, seed=None, checkpoint=None, checkpoint_every=500, resume=False,
                 progress=True, callback=None, history_every=50):
     """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
@@ -257,11 +294,14 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
                  optimizer=optimizer, schedule=schedule, warmup=warmup,
                  normal_weight=normal_weight, dtype=dtype, init=init, input_scale=input_scale,
-                 time_budget=time_budget,
+                 time_budget=time_budget, tangent_weight=tangent_weight,
+                 readout_every=readout_every, readout=readout,
                  tol=tol, n_eval=n_eval, seed=seed)
     o.update({k: v for k, v in given.items() if v is not None})
     _check_options(o)
     t_dtype = np.dtype(o["dtype"])
+    choices = _plan(target, o, {k for k, v in given.items() if v is not None}, net,
+                    elapsed=elapsed_before)
     rng = as_generator(o["seed"])
     key = _resume_key(target, o, net)
 
@@ -272,6 +312,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         net = state["net"].astype(t_dtype)
         rng.bit_generator.state = state["rng"]
         start, history, elapsed0 = state["step"], state["history"], state["seconds"]
+        if o["steps"] is None:
+            o["steps"] = state["total"]
     else:
         if net is None:
             net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype,
@@ -286,10 +328,16 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     if state is not None:
         opt.load_state_dict(state["opt"])
 
-    total = o["steps"]
-    bar = Progress(total, "fit", enabled=progress)
+    # with no step count the schedule runs on the clock: its decay ends with the time budget
+    auto_steps = o["steps"] is None
+    total = o["steps"] if not auto_steps else _MAX_AUTO_STEPS
+    if auto_steps and o["schedule"] == "cosine":
+        opt.schedule = _ClockCosine(opt.schedule, lambda: time.perf_counter() - t0,
+                                    o["time_budget"])
+    bar = Progress(total if not auto_steps else 1, "fit", enabled=progress)
     t0 = time.perf_counter() - elapsed0
     w = o["normal_weight"]
+    tw = o["tangent_weight"]
     order = 1 if w else 0
     ema_pos = ema_nrm = None
     stopped = "step budget"
@@ -299,7 +347,7 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     def write_checkpoint():
         if checkpoint is not None:
             _save_checkpoint(checkpoint, net, opt, rng, step, history, time.perf_counter() - t0,
-                             key, target, metadata)
+                             key, target, metadata, total)
 
     try:
         while step < total:
@@ -310,7 +358,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
             parts = {"position": 0.0, "normal": 0.0}
 
             def loss_fn(y, JD, sl):
-                val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p), w)
+                val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p), w,
+                                                        tangent_weight=tw)
                 parts["position"] += pr["position"]
                 parts["normal"] += pr["normal"]
                 return val, dy, dJD
@@ -325,6 +374,11 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
             lr_now = opt.lr()
             opt.step(net.theta, grad)
             step += 1
+            if o["readout_every"] and step % o["readout_every"] == 0:
+                if o["readout"] == "gn":
+                    _gauss_newton_readout(net, target, rng, w, tw)
+                else:
+                    _ridge_readout(net, target, rng)
             last_loss = loss
             pos_ms = parts["position"] / len(p)
             nrm_ms = parts["normal"] / len(p)
@@ -343,7 +397,13 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
                         "lr": lr_now, "seconds": elapsed, "net": net}):
                     stopped = "callback"
                     break
-            bar.update(step, loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}", nrm=f"{nrm_deg:.2f}deg")
+            if auto_steps:          # the bar counts seconds of the budget
+                bar.total = max(int(o["time_budget"]), 1)
+                bar.update(min(int(elapsed), bar.total), step=step, loss=f"{loss:.2e}",
+                           pos=f"{pos_rms:.1e}", nrm=f"{nrm_deg:.2f}deg")
+            else:
+                bar.update(step, loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}",
+                           nrm=f"{nrm_deg:.2f}deg")
             if checkpoint is not None and step % checkpoint_every == 0:
                 write_checkpoint()
             if o["tol"] is not None and step >= 20 and pos_rms < o["tol"]:
@@ -359,7 +419,7 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     except DivergenceError:
         bar.close()
         raise
-    bar.close(step, loss=f"{last_loss:.2e}")
+    bar.close(step if not auto_steps else bar.total, loss=f"{last_loss:.2e}")
     seconds = time.perf_counter() - t0
     write_checkpoint()
 
@@ -369,28 +429,179 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     report.steps, report.seconds, report.stopped = step, seconds, stopped
     report.final_loss = float(last_loss)
     report.history = {k: np.asarray(v) for k, v in history.items()}
+    if auto_steps:
+        choices["steps"]["value"] = step
     report.options = {k: v for k, v in o.items()}
+    report.choices = choices
+    report.add_quality_notes()
     surface.metadata.update(fit=report.to_json())
     return surface, report
 
 
+# ------------------------------------------------------------------------------ planning
+
+#: the read-out error of scale-4 features (normalised units, area 4 pi; :func:`detail`) at
+#: and below which a target is treated as smooth, and at and above which as detailed; in
+#: between, the choices are interpolated on a log scale. Measured (docs/fitting.md): spheres
+#: and ellipsoids 6e-4 - 3.3e-3; spot, max, the armadillo and the paper's shapes 3e-2 - 1.2e-1
+DETAIL_RANGE = (5e-3, 2e-2)
+
+#: the options "auto" chooses at either end of DETAIL_RANGE
+AUTO = {
+    "smooth": {"input_scale": 4.0, "lr": 1e-4, "time_budget": 200.0},
+    "detailed": {"input_scale": 40.0, "lr": 4e-3, "time_budget": 540.0},
+}
+
+
+#: the most steps a fit with no step count takes (it normally stops on its time budget)
+_MAX_AUTO_STEPS = 1_000_000
+
+
+class _ClockCosine:
+    """A cosine schedule on the clock: the warm-up of ``base`` over its first steps, then the
+    decay from ``lr`` to ``lr_min`` over the fraction of ``budget`` seconds elapsed."""
+
+    kind = "cosine-clock"
+
+    def __init__(self, base, clock, budget):
+        self.base, self.clock, self.budget = base, clock, float(budget)
+
+    def __call__(self, t):
+        b = self.base
+        frac = min(self.clock() / self.budget, 1.0)
+        lr = b.lr_min + 0.5 * (b.lr - b.lr_min) * (1.0 + np.cos(np.pi * frac))
+        if b.warmup and t < b.warmup:
+            lr *= (t + 1) / b.warmup
+        return float(lr)
+
+
+def _auto_values(d):
+    """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1)."""
+    lo, hi = DETAIL_RANGE
+    t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
+    a, b = AUTO["smooth"], AUTO["detailed"]
+    vals = {k: float(a[k] ** (1 - t) * b[k] ** t) for k in a}
+    if t in (0.0, 1.0):
+        vals = dict(a if t == 0.0 else b)
+    return vals, t
+
+
+def detail(target, width=256, depth=8, n=4096, seed=12345):
+    """How much detail a target has: the held-out RMS error (normalised units) of the best
+    linear read-out of the scale-4 features of a fresh reference network (256 x 8, whatever
+    the network being fitted).
+
+    Smooth shapes are nearly linear in those features (the built-in ellipsoid: 3.5e-3); meshes
+    with ears, horns and faces are not (spot: 4.8e-2). It costs one forward pass of ``n``
+    points and a ``width x width`` solve, and draws from its own generator, so it does not
+    change a fit's random stream.
+    """
+    g = np.random.default_rng(seed)
+    net = ResidualMLP(width=width, depth=depth, seed=g, input_scale=4.0)
+    p, q, _ = target.sample(2 * n, g)
+    H = net.features(p)
+    G = H[:n].T @ H[:n]
+    G[np.diag_indices_from(G)] += 1e-6 * np.trace(G) / G.shape[0]
+    W = np.linalg.solve(G, H[:n].T @ q[:n])
+    r = H[n:] @ W - q[n:]
+    return float(np.sqrt((r ** 2).sum(axis=1).mean()))
+
+
+def _plan(target, o, given, net, elapsed=0.0):
+    """Fill the options left to "auto" from the target's detail; returns the choices made
+    (option -> {"value", "why"})."""
+    choices = {}
+    fresh = net is None
+    todo = [k for k in ("input_scale", "lr") if k not in given and (fresh or k == "lr")]
+    if o["steps"] is None and o["time_budget"] is None:
+        todo.append("time_budget")
+    if todo:
+        d = detail(target)
+        vals, t = _auto_values(d)
+        kind = "smooth" if t == 0 else "detailed" if t == 1 else f"between ({t:.2f})"
+        choices["detail"] = {"value": d, "why": f"{kind}: read-out error of scale-4 features; "
+                             f"smooth <= {DETAIL_RANGE[0]:g}, detailed >= {DETAIL_RANGE[1]:g}"}
+        for k in todo:
+            v = vals[k]
+            if k == "time_budget":
+                v = max(v - elapsed, 10.0)
+            o[k] = v
+            choices[k] = {"value": v, "why": f"{kind} target"
+                          + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
+                             if k == "time_budget" and elapsed else "")}
+    if o["steps"] is None:
+        choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
+                            "learning rate decays with the time elapsed"}
+    return choices
+
+
 # ------------------------------------------------------------------------------ internals
+
+#: the keyword arguments of fit_sampler that fit_mesh and fit_shape pass through
+_PASSED = ("net", "checkpoint", "checkpoint_every", "resume", "progress", "callback",
+           "history_every", "source")
+
+
+def _check_early(options):
+    """Refuse unknown or contradictory options before any work (embedding, fitting) starts."""
+    unknown = sorted(set(options) - set(DEFAULTS) - set(_PASSED))
+    if unknown:
+        raise TypeError(f"unknown fitting option(s) {', '.join(map(repr, unknown))}; expected "
+                        f"some of {', '.join(sorted(DEFAULTS))} or "
+                        f"{', '.join(_PASSED)}")
+    o = dict(DEFAULTS)
+    o.update({k: v for k, v in options.items() if k in DEFAULTS and v is not None})
+    _check_options(o)
+    if o["steps"] is not None and o["time_budget"] is not None and options.get("net") is None:
+        per_step = _probe_step_time(o)
+        if o["steps"] * per_step > 2.0 * o["time_budget"]:
+            raise ValueError(
+                f"steps={o['steps']} cannot be reached in time_budget={o['time_budget']:g} s: "
+                f"a step of this network takes about {per_step * 1e3:.0f} ms here, so "
+                f"{o['steps']} steps need about {o['steps'] * per_step:.0f} s; pass only one "
+                f"of them (time_budget alone sizes the step count to fit)")
+
+
+def _probe_step_time(o, repeats=2):
+    """Seconds per training step of the options' network and batch, measured on this machine
+    (a fresh network, random points: about a second)."""
+    g = np.random.default_rng(0)
+    net = ResidualMLP(width=o["width"], depth=o["depth"], seed=g, dtype=np.dtype(o["dtype"]))
+    p = g.standard_normal((o["batch"], 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
+
+    def loss_fn(y, JD, sl):
+        return float((y * y).sum()), 2 * y, np.zeros_like(JD)
+
+    net.value_and_grad(pc, loss_fn, order=1, directions=R)      # compiles on a first call
+    t = time.perf_counter()
+    for _ in range(repeats):
+        net.value_and_grad(pc, loss_fn, order=1, directions=R)
+    return (time.perf_counter() - t) / repeats
+
 
 def _check_options(o):
     check_positive_int(o["width"], "width")
     check_positive_int(o["depth"], "depth", minimum=0)
-    check_positive_int(o["steps"], "steps")
+    if o["steps"] is not None:
+        check_positive_int(o["steps"], "steps")
     check_positive_int(o["batch"], "batch")
     check_positive_int(o["n_eval"], "n_eval")
     check_positive_int(o["warmup"], "warmup", minimum=0)
-    check_positive_float(o["lr"], "lr")
+    if o["lr"] is not None:
+        check_positive_float(o["lr"], "lr")
     check_positive_float(o["lr_min"], "lr_min", allow_zero=True)
     check_positive_float(o["normal_weight"], "normal_weight", allow_zero=True)
-    check_positive_float(o["input_scale"], "input_scale")
+    if o["input_scale"] is not None:
+        check_positive_float(o["input_scale"], "input_scale")
     check_choice(o["optimizer"], "optimizer", {"adam", "rmsprop", "sgd"})
     check_choice(o["schedule"], "schedule", {"constant", "cosine"})
     check_choice(o["dtype"], "dtype", {"float32", "float64"})
     check_choice(o["init"], "init", {"ridge", "random"})
+    check_choice(o["readout"], "readout", {"gn", "ridge"})
+    check_positive_float(o["tangent_weight"], "tangent_weight")
+    check_positive_int(o["readout_every"], "readout_every", minimum=0)
     if o["time_budget"] is not None:
         check_positive_float(o["time_budget"], "time_budget")
     if o["tol"] is not None:
@@ -400,7 +611,87 @@ def _check_options(o):
 def _schedule(o):
     if o["schedule"] == "constant":
         return Schedule("constant", o["lr"], warmup=o["warmup"])
-    return Schedule("cosine", o["lr"], total=o["steps"], lr_min=o["lr_min"], warmup=o["warmup"])
+    return Schedule("cosine", o["lr"], total=o["steps"] or _MAX_AUTO_STEPS, lr_min=o["lr_min"],
+                    warmup=o["warmup"])
+
+
+def _feature_jet(net, p, R):
+    """The last hidden layer and its derivatives along the frame: h (n, w), hD (n, w, 2)."""
+    f = ResidualMLP.zeros(net.in_dim, net.width, net.width, net.depth, net.bias,
+                          dtype=np.float64)
+    src = net.astype(np.float64)
+    for name, (sl, _) in src.param_slices().items():
+        if name not in ("W3", "b3"):
+            f.theta[sl] = src.theta[sl]
+    f.W3[...] = np.eye(net.width)
+    return f.jet(p, order=1, directions=R)
+
+
+def _cross_matrix(a):
+    """[a]_x with [a]_x b = a x b, for rows a (n, 3) -> (n, 3, 3)."""
+    z = np.zeros(len(a))
+    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
+                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)
+
+
+def _gauss_newton_readout(net, target, rng, normal_weight, tangent_weight=1.0, n=4096,
+                          iters=2, rel_reg=1e-6):
+    """Levenberg-Marquardt steps on the output layer for the full position + normal loss.
+
+    The loss is quadratic in ``W3`` through the positions and, through the normals
+    ``n = (W3 h_u) x (W3 h_v) / |...|``, nearly so: linearising the normals gives a
+    768-unknown least-squares problem whose solution is the best read-out of the current
+    features (variable projection). A step is kept only if it lowers the loss on its sample.
+    """
+    p, q, nt = target.sample(n, rng)
+    R = tangent_frame(p)
+    h, hD = _feature_jet(net, p, R)
+    w = net.width
+    W = net.W3.astype(np.float64).copy()
+    sw = np.sqrt(normal_weight)
+    Mh = np.einsum("ki,kj->kij", nt, nt)
+    Mh = Mh + np.sqrt(tangent_weight) * (np.eye(3) - Mh)
+
+    def residuals(W):
+        y = h @ W.T + (net.b3.astype(np.float64) if net.bias else 0.0)
+        Su, Sv = hD[:, :, 0] @ W.T, hD[:, :, 1] @ W.T
+        nrm, c = normals_from_tangents(Su, Sv)
+        rp = np.einsum("kab,kb->ka", Mh, y - q)
+        return rp, sw * (nrm - nt), Su, Sv, nrm, c
+
+    def loss(rp, rn):
+        return float((rp ** 2).sum() + (rn ** 2).sum()) / n
+
+    rp, rn, Su, Sv, nrm, c = residuals(W)
+    cur = loss(rp, rn)
+    lam = None
+    for _ in range(iters):
+        # position block: d rp_a / dW_ij = Mh_ai h_j ; normal block as in losses.py
+        Jp = np.einsum("kai,kj->kaij", Mh, h).reshape(n * 3, 3 * w)
+        P = (np.eye(3) - np.einsum("ka,kb->kab", nrm, nrm)) / c[:, None, None]
+        A = -np.einsum("kab,kbi->kai", P, _cross_matrix(Sv))
+        B = np.einsum("kab,kbi->kai", P, _cross_matrix(Su))
+        Jn = sw * (np.einsum("kai,kj->kaij", A, hD[:, :, 0])
+                   + np.einsum("kai,kj->kaij", B, hD[:, :, 1])).reshape(n * 3, 3 * w)
+        G = Jp.T @ Jp + Jn.T @ Jn
+        g = Jp.T @ rp.ravel() + Jn.T @ rn.ravel()
+        if lam is None:
+            lam = rel_reg * np.trace(G) / G.shape[0]
+        for _try in range(6):
+            Gd = G.copy()
+            Gd[np.diag_indices_from(Gd)] += lam
+            Wn = W - np.linalg.solve(Gd, g).reshape(3, w)
+            out = residuals(Wn)
+            new = loss(out[0], out[1])
+            if np.isfinite(new) and new < cur:
+                W, cur, lam = Wn, new, lam / 3
+                rp, rn, Su, Sv, nrm, c = out
+                break
+            lam *= 10
+        else:
+            break
+    net.W3[...] = W.astype(net.dtype)
+    return cur
 
 
 def _ridge_readout(net, target, rng, n=8192, rel_reg=1e-6):
@@ -445,13 +736,15 @@ def _resume_key(target, o, net):
     return json.dumps(keep, sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata):
+def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata,
+                     total):
     surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
                                      metadata=dict(metadata or {}))
     arrays = surface.state()
     arrays.update({f"opt.{k}": v for k, v in opt.state_dict().items()})
     arrays.update({
         "checkpoint.step": np.array(step), "checkpoint.seconds": np.array(seconds),
+        "checkpoint.total": np.array(total),
         "checkpoint.key": np.array(key),
         "checkpoint.rng": np.array(json.dumps(rng.bit_generator.state)),
     })
@@ -471,6 +764,8 @@ def _load_checkpoint(path, key):
         opt = {k[4:]: data[k] for k in data.files if k.startswith("opt.")}
         history = {k[len("checkpoint.history."):]: list(data[k]) for k in data.files
                    if k.startswith("checkpoint.history.")}
+        total = int(data["checkpoint.total"]) if "checkpoint.total" in data else None
         return {"net": surface.net, "opt": opt, "step": int(data["checkpoint.step"]),
+                "total": total,
                 "seconds": float(data["checkpoint.seconds"]), "history": history,
                 "rng": json.loads(str(data["checkpoint.rng"]))}

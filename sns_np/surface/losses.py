@@ -41,7 +41,8 @@ def normals_from_tangents(Su, Sv):
     return c / np.maximum(norm, np.finfo(c.dtype).tiny)[:, None], norm
 
 
-def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0):
+def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
+                         tangent_weight=1.0):
     """Position + normal loss on one chunk and its cotangents.
 
     Parameters
@@ -64,8 +65,16 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     """
     r = scale * y - q
     sq_pos = float(np.einsum("ij,ij->", r, r))
-    dy = (2.0 * scale / n_total) * r
-    loss = sq_pos / n_total
+    if tangent_weight != 1.0:
+        # |r|^2 -> (r . n_t)^2 + t |r - (r . n_t) n_t|^2: the tangential part of the error
+        # moves points along the surface, not off it
+        rn = np.einsum("ij,ij->i", r, normals)[:, None] * normals
+        rw = rn + tangent_weight * (r - rn)
+        loss = float(np.einsum("ij,ij->", r, rw)) / n_total
+        dy = (2.0 * scale / n_total) * rw
+    else:
+        dy = (2.0 * scale / n_total) * r
+        loss = sq_pos / n_total
     parts = {"position": sq_pos, "normal": 0.0}
     if not normal_weight:
         return loss, dy, None, parts

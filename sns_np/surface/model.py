@@ -332,7 +332,7 @@ def _check_metadata(metadata, source):
         if not isinstance(v, (int, float)) or isinstance(v, bool):
             raise ModelFileError(f"{source}: field 'metadata.fit.{k}' must be a number, got "
                                  f"{type(v).__name__}")
-    for k in ("options", "history"):
+    for k in ("options", "history", "choices"):
         if not isinstance(fit.get(k, {}), dict):
             raise ModelFileError(f"{source}: field 'metadata.fit.{k}' must be a JSON object, "
                                  f"got {type(fit[k]).__name__}")
