@@ -7,6 +7,7 @@ Run::
     python benchmarks/fit_quality.py spot --time-budget 1800 # any fitting option
     python benchmarks/fit_quality.py dtype --steps 150       # float32 vs float64 training
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
+    python benchmarks/fit_quality.py detail                  # the detail measure of each case
 
 Cases:
 
@@ -229,6 +230,24 @@ def comparison_case(args):
               f"H error {100 * e['H']:.2f}%, position RMS {rep.position_rms:.2e}")
 
 
+def detail_case(args):
+    """The detail measure that chooses the fitting defaults, for every case."""
+    from sns_np.surface.fit import _MeshTarget, _ShapeTarget, detail
+    for case in ALL:
+        if case in SHAPES:
+            target, n = _ShapeTarget(_shape(case)), "-"
+        else:
+            if case == "ellipsoid":
+                from sns_np.shapes import Ellipsoid
+                V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
+            elif case in ANALYTIC_MESHES:
+                V, F = _shape(case[:-1]).mesh(5)
+            else:
+                V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
+            target, n = _MeshTarget(V, F, verbose=False), len(V)
+        print(f"{case}: {n} vertices, detail {detail(target):.2e}", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("cases", nargs="*", default=list(ALL),
@@ -245,6 +264,9 @@ def main(argv=None):
     args = ap.parse_args(argv)
     if args.cases and args.cases[0] in ("dtype", "init"):
         comparison_case(args)
+        return
+    if args.cases and args.cases[0] == "detail":
+        detail_case(args)
         return
     bad = [c for c in args.cases if c not in ALL]
     if bad:

@@ -8,13 +8,13 @@ surface answers in the mesh's own units and is saved as a .npz model for the oth
 Run (from the project root):
 
     python examples/fit_mesh.py                    # the built-in ellipsoid, 2,562 vertices
-    python examples/fit_mesh.py ../shared/data/meshes/spot_triangulated.obj --input-scale 40
+    python examples/fit_mesh.py ../shared/data/meshes/spot_triangulated.obj
     python examples/fit_mesh.py --help
 
-The default budget is the library's (a 256 x 8 network, 800 steps): minutes on a laptop,
-longer on a small shared machine; --steps, --width and --depth trade accuracy for time.
-A detailed mesh wants --input-scale 40 (faster-varying first-layer features; the default 4
-suits smooth shapes such as the built-in ellipsoid; docs/fitting.md).
+The default budget is the library's: a 256 x 8 network, and a time budget chosen from the
+mesh's detail (200 s for a smooth mesh, 540 s for a detailed one; docs/fitting.md), as are the
+first layer's scale and the learning rate. --time-budget, --steps, --width and --depth trade
+accuracy for time.
 SNS_NP_SMOKE=1 uses a 32 x 2 network and 50 steps: seconds, and a rough surface.
 Output: OUT_DIR/<mesh name>.npz (OUT_DIR defaults to ./sns_np_examples_out).
 """
@@ -45,12 +45,15 @@ def main(argv=None):
                         help="closed genus-0 mesh (.obj, .off, .ply, .stl); "
                              "default: the built-in ellipsoid")
     parser.add_argument("--out-dir", default=DEFAULT_OUT_DIR, help="output folder (%(default)s)")
-    parser.add_argument("--steps", type=positive_int, help="training steps (default 800)")
+    parser.add_argument("--steps", type=positive_int,
+                        help="training steps (default: as many as fit the time budget)")
+    parser.add_argument("--time-budget", type=float,
+                        help="seconds of fitting (default: chosen from the mesh's detail)")
     parser.add_argument("--width", type=positive_int, help="network width (default 256)")
     parser.add_argument("--depth", type=positive_int, help="residual blocks (default 8)")
     parser.add_argument("--input-scale", type=float,
-                        help="first-layer scale of the initial network (default 4; 40 for "
-                             "detailed meshes)")
+                        help="first-layer scale of the initial network (default: chosen "
+                             "from the mesh's detail, 4 to 40)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (%(default)s)")
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     args = parser.parse_args(argv)
@@ -58,7 +61,8 @@ def main(argv=None):
     # the library's defaults, unless smoke mode or the command line says otherwise
     budget = dict(SMOKE_FIT) if SMOKE else {}
     budget.update({k: v for k, v in vars(args).items()
-                   if k in ("steps", "width", "depth", "input_scale") and v is not None})
+                   if k in ("steps", "time_budget", "width", "depth", "input_scale")
+                   and v is not None})
 
     with clear_errors(parser):
         out_dir = output_dir(args.out_dir)

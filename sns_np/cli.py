@@ -57,7 +57,9 @@ def _add_fit_options(p):
     g.add_argument("--width", type=_positive_int, help="network width (default 256)")
     g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
     g.add_argument("--batch", type=_positive_int, help="samples per step (default 2048)")
-    g.add_argument("--lr", type=_positive_float, help="peak learning rate (default 2e-3)")
+    g.add_argument("--lr", type=_positive_float,
+                   help="peak learning rate (default: chosen from the mesh's detail, 1e-4 "
+                        "to 4e-3)")
     g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
     g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
     g.add_argument("--input-scale", type=_positive_float,

@@ -37,7 +37,7 @@ __all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "DEFAULTS"]
 #: default fitting options (docs/fitting.md explains and measures each choice)
 DEFAULTS = dict(
     width=256, depth=8, steps=None, batch=2048, lr=None, lr_min=1e-5, optimizer="adam",
-    schedule="cosine", warmup=50, normal_weight=1.0, dtype="float32", init="ridge",
+    schedule="cosine", warmup=None, normal_weight=1.0, dtype="float32", init="ridge",
     input_scale=None, tangent_weight=1.0, readout_every=0,
     readout="gn",
     time_budget=None, tol=None, n_eval=20000, seed=0,
@@ -312,8 +312,6 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         net = state["net"].astype(t_dtype)
         rng.bit_generator.state = state["rng"]
         start, history, elapsed0 = state["step"], state["history"], state["seconds"]
-        if o["steps"] is None:
-            o["steps"] = state["total"]
     else:
         if net is None:
             net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype,
@@ -347,7 +345,7 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     def write_checkpoint():
         if checkpoint is not None:
             _save_checkpoint(checkpoint, net, opt, rng, step, history, time.perf_counter() - t0,
-                             key, target, metadata, total)
+                             key, target, metadata)
 
     try:
         while step < total:
@@ -448,8 +446,8 @@ DETAIL_RANGE = (5e-3, 2e-2)
 
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
-    "smooth": {"input_scale": 4.0, "lr": 1e-4, "time_budget": 200.0},
-    "detailed": {"input_scale": 40.0, "lr": 4e-3, "time_budget": 540.0},
+    "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 200.0},
+    "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0},
 }
 
 
@@ -511,8 +509,12 @@ def _plan(target, o, given, net, elapsed=0.0):
     """Fill the options left to "auto" from the target's detail; returns the choices made
     (option -> {"value", "why"})."""
     choices = {}
-    fresh = net is None
-    todo = [k for k in ("input_scale", "lr") if k not in given and (fresh or k == "lr")]
+    if net is not None:
+        # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
+        for k in ("lr", "warmup"):
+            if k not in given:
+                o[k] = AUTO["smooth"][k]
+    todo = [k for k in ("input_scale", "lr", "warmup") if k not in given and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
@@ -525,6 +527,8 @@ def _plan(target, o, given, net, elapsed=0.0):
             v = vals[k]
             if k == "time_budget":
                 v = max(v - elapsed, 10.0)
+            elif k == "warmup":
+                v = int(round(v))
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
@@ -588,7 +592,8 @@ def _check_options(o):
         check_positive_int(o["steps"], "steps")
     check_positive_int(o["batch"], "batch")
     check_positive_int(o["n_eval"], "n_eval")
-    check_positive_int(o["warmup"], "warmup", minimum=0)
+    if o["warmup"] is not None:
+        check_positive_int(o["warmup"], "warmup", minimum=0)
     if o["lr"] is not None:
         check_positive_float(o["lr"], "lr")
     check_positive_float(o["lr_min"], "lr_min", allow_zero=True)
@@ -736,15 +741,13 @@ def _resume_key(target, o, net):
     return json.dumps(keep, sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata,
-                     total):
+def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata):
     surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
                                      metadata=dict(metadata or {}))
     arrays = surface.state()
     arrays.update({f"opt.{k}": v for k, v in opt.state_dict().items()})
     arrays.update({
         "checkpoint.step": np.array(step), "checkpoint.seconds": np.array(seconds),
-        "checkpoint.total": np.array(total),
         "checkpoint.key": np.array(key),
         "checkpoint.rng": np.array(json.dumps(rng.bit_generator.state)),
     })
@@ -764,8 +767,6 @@ def _load_checkpoint(path, key):
         opt = {k[4:]: data[k] for k in data.files if k.startswith("opt.")}
         history = {k[len("checkpoint.history."):]: list(data[k]) for k in data.files
                    if k.startswith("checkpoint.history.")}
-        total = int(data["checkpoint.total"]) if "checkpoint.total" in data else None
         return {"net": surface.net, "opt": opt, "step": int(data["checkpoint.step"]),
-                "total": total,
                 "seconds": float(data["checkpoint.seconds"]), "history": history,
                 "rng": json.loads(str(data["checkpoint.rng"]))}
