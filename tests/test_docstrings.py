@@ -40,6 +40,7 @@ PENDING = {
     "sns_np.surface.fit.fit_sampler",
     "sns_np.surface.fit.FitReport",
     "sns_np.surface.fit.FitReport.summary",
+    "sns_np.surface.fit.FitReport.add_quality_notes",
     "sns_np.surface.fit.FitReport.to_json",
     # sns_np/surface/losses.py
     "sns_np.surface.losses.position_normal_loss",

@@ -250,8 +250,8 @@ def fit_sdf(sdf, grad=None, *, init="radial", center=(0.0, 0.0, 0.0), radius_max
     the paper's 256 x 8):
 
     >>> sdf = lambda x: np.linalg.norm(x, axis=1) - 2.0
-    >>> S, report = fit_sdf(sdf, width=16, depth=1, steps=60, iterations=1, n_pool=2048,
-    ...                     n_eval=512, progress=False)
+    >>> S, report = fit_sdf(sdf, width=16, depth=1, steps=60, iterations=1, n_eval=512,
+    ...                     progress=False)
     >>> r = np.linalg.norm(S(np.array([[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]])), axis=1)
     >>> bool(np.allclose(r, 2.0, atol=0.1)), bool(report.relative_mean < 0.02)
     (True, True)

@@ -149,7 +149,7 @@ class SphericalNeuralSurface:
         --------
         >>> S, report = SphericalNeuralSurface.fit_sdf(lambda x: np.linalg.norm(x, axis=1) - 1.0,
         ...                                            width=16, depth=1, steps=60, iterations=1,
-        ...                                            n_pool=2048, n_eval=512, progress=False)
+        ...                                            n_eval=512, progress=False)
         >>> bool(report.relative_mean < 0.02)
         True
         """
