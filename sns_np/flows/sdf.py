@@ -273,7 +273,7 @@ def fit_sdf(sdf, grad=None, *, init="radial", center=(0.0, 0.0, 0.0), radius_max
     # the options the SDF fits were measured with (docs/flows.md), not the mesh-fitting
     # defaults, which adapt the first layer and the rate to detailed meshes
     common = dict(seed=rng, progress=progress, **{"lr": 1e-4, "input_scale": 4.0,
-                                                  **fit_options})
+                                                  "warmup": 50, **fit_options})
 
     # ------------------------------------------------------------------ the start
     if isinstance(init, str):

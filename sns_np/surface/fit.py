@@ -192,6 +192,9 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
         :func:`sns_np.mesh.spherical_embedding` when omitted.
     check : bool
         Run :func:`sns_np.mesh.check` first (raises a specific MeshError on defects).
+    smooth : {"phong", "none"}
+        Position targets on the Phong-tessellated mesh (default: the mesh's vertex normals
+        bend each triangle like the surface it samples) or on the flat triangles.
     **options
         See :func:`fit_sampler` (steps, batch, lr, time_budget, checkpoint, ...).
 
@@ -242,14 +245,17 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
         Architecture of a fresh network (default 256 x 8, the reference's).
-    steps : int
-        Step budget (default 800).
+    steps : int, optional
+        Step budget. Default: as many steps as fit in ``time_budget``, with the cosine decay
+        running on the clock (over the fraction of the budget elapsed).
     batch : int
         Fresh samples per step (default 2048, the reference's).
     lr, lr_min, schedule, warmup, optimizer
-        Adam by default, cosine decay from ``lr`` = 1e-4 to ``lr_min`` = 1e-5 over ``steps``
-        with a linear warm-up; ``optimizer="rmsprop"`` with ``lr=1e-4`` reproduces the
-        reference's settings.
+        Adam by default, cosine decay from ``lr`` to ``lr_min`` = 1e-5 with a linear warm-up
+        of ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
+        :func:`detail` (1e-4 and 50 for a smooth target, 4e-3 and 100 for a detailed one; a
+        warm start ``net`` uses the smooth end's). ``optimizer="rmsprop", lr=1e-4,
+        schedule="constant", normal_weight=1e-4`` reproduces the reference's settings.
     normal_weight : float
         Weight of the normal term (default 1.0; the reference's 1e-4 leaves the normals to
         the position term, which on a mesh is dominated by the tangential error of the
@@ -261,13 +267,23 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         on its initial features, so training starts from the best linear read-out instead of a
         point (see docs/fitting.md for the measured effect).
     input_scale : float
-        First-layer scale of a fresh network (default 4: ``W0`` std ``4 / sqrt(3)``; the
-        network's own default is 2). Larger values give features that vary faster over the
-        sphere: use 40 for a detailed mesh (spot: 13.6 -> 1.9 degrees of normal error at 800
-        steps), keep 4 for coarse meshes of smooth shapes, whose curvature a large scale
-        makes follow the facets (docs/fitting.md).
+        First-layer scale of a fresh network (``W0`` std ``input_scale / sqrt(3)``; the
+        network's own default is 2). Default: chosen from the target's :func:`detail`, 4 for
+        a smooth target (a larger scale makes the curvature of a coarse mesh of a smooth shape
+        follow its facets) and 40 for a detailed one (features that vary fast enough for
+        ears, horns and faces), interpolated in between (docs/fitting.md).
     time_budget : float, seconds, optional
-        Stop when exceeded (checked every step).
+        Stop when exceeded (checked every step). Default when ``steps`` is not given either:
+        chosen from the target's detail, 200 s (smooth) to 540 s (detailed) in all, less the
+        ``elapsed_before`` seconds already spent (the embedding). A ``steps`` that this budget
+        cannot reach is refused before the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
+    tangent_weight : float
+        Weight of the tangential part of the position error (default 1: the plain squared
+        distance); smaller values let points slide along the target (docs/fitting.md).
+    readout_every : int
+        Refit the output layer every this many steps (default 0: never) by
+        ``readout="gn"`` (Levenberg-Marquardt on the full position + normal loss) or
+        ``"ridge"`` (least squares on the positions only).
     tol : float, optional
         Stop when the running RMS position error, relative to the normalised size (the
         surface has area 4 pi), falls below ``tol``.
@@ -285,10 +301,14 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     callback : callable ``callback(step, info) -> bool``, optional
         Called every ``history_every`` steps with a dict of current figures; returning True
         stops the fit.
+    elapsed_before : float
+        Seconds already spent on this fit before the call (the embedding); an automatic time
+        budget is shortened by it.
 
     Returns
     -------
     (SphericalNeuralSurface, FitReport)
+        The report's ``choices`` say what the options left unset became and why.
     """
     o = dict(DEFAULTS)
     given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
@@ -497,11 +517,14 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
     g = np.random.default_rng(seed)
     net = ResidualMLP(width=width, depth=depth, seed=g, input_scale=4.0)
     p, q, _ = target.sample(2 * n, g)
+    n = len(p) // 2                      # a target with a finite pool may return fewer
+    if n < 16:
+        raise ValueError(f"detail: the target returned {len(p)} samples; need at least 32")
     H = net.features(p)
     G = H[:n].T @ H[:n]
     G[np.diag_indices_from(G)] += 1e-6 * np.trace(G) / G.shape[0]
     W = np.linalg.solve(G, H[:n].T @ q[:n])
-    r = H[n:] @ W - q[n:]
+    r = H[n:2 * n] @ W - q[n:2 * n]
     return float(np.sqrt((r ** 2).sum(axis=1).mean()))
 
 
