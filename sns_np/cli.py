@@ -279,7 +279,9 @@ def _choice_lines(choices):
         if isinstance(c, dict):
             v = c.get("value")
             v = f"{v:.3g}" if isinstance(v, float) else v
-            out.append(f"  chosen {_printable(k)} = {_printable(v)} ({_printable(c.get('why'))})")
+            verb = "measured" if k == "detail" else "chosen"
+            out.append(f"  {verb} {_printable(k)} = {_printable(v)} "
+                       f"({_printable(c.get('why'))})")
     return out
 
 

@@ -190,7 +190,7 @@ def test_gauss_newton_readout_lowers_the_loss():
 
 def test_auto_choices_follow_the_detail_and_are_recorded():
     from sns_np.shapes import Bobble
-    from sns_np.surface.fit import AUTO, detail, _ShapeTarget
+    from sns_np.surface.fit import AUTO, _ShapeTarget, detail
     smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
     assert smooth < 5e-3 < 2e-2 < bumpy
     opts = dict(TINY, steps=3)
