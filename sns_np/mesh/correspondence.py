@@ -36,6 +36,12 @@ def uniform_barycentric(n: int, rng=None) -> np.ndarray:
     -------
     beta : (n, 3) float array, non-negative rows summing to 1
 
+    Examples
+    --------
+    >>> beta = uniform_barycentric(1000, rng=0)
+    >>> beta.shape, bool(np.allclose(beta.sum(axis=1), 1.0)), bool((beta >= 0).all())
+    ((1000, 3), True, True)
+
     References
     ----------
     R. Osada, T. Funkhouser, B. Chazelle and D. Dobkin, "Shape distributions", ACM Transactions
@@ -157,11 +163,31 @@ class Correspondence:
         return x / np.linalg.norm(x, axis=1, keepdims=True)
 
     def to_sphere(self, face, beta) -> np.ndarray:
-        """Sphere points ``p`` (k, 3), exactly unit, of barycentric points ``(face, beta)``."""
+        """Sphere points ``p`` (k, 3), exactly unit, of barycentric points ``(face, beta)``.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> p = C.to_sphere(np.array([0, 5]), np.full((2, 3), 1 / 3))
+        >>> bool(np.allclose(np.linalg.norm(p, axis=1), 1.0))
+        True
+        """
         return self._unit(self._combine(self._corners[:, :, 3:6], face, beta))
 
     def to_mesh(self, face, beta):
-        """Mesh points ``q`` (k, 3) and unit interpolated normals (k, 3) of ``(face, beta)``."""
+        """Mesh points ``q`` (k, 3) and unit interpolated normals (k, 3) of ``(face, beta)``.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> q, n = C.to_mesh(np.array([0]), np.array([[1.0, 0.0, 0.0]]))    # a corner
+        >>> bool(np.allclose(q[0], C.V[F[0, 0]])), bool(np.allclose(n[0], C.N[F[0, 0]]))
+        (True, True)
+        """
         X = self._combine(self._corners, face, beta)
         return X[:, 0:3], self._unit(X[:, 6:9])
 
@@ -177,6 +203,17 @@ class Correspondence:
         on an icosphere of level 2 its mean distance to the sphere is 0.46 of the flat
         triangles' (tests/test_surface.py). The flat triangles' chordal error is what a network
         fitted to them reproduces as curvature along the edges.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(2)
+        >>> C = Correspondence(V, F, V)
+        >>> face, beta = C.sample_barycentric(2000, rng=0)
+        >>> flat = np.abs(np.linalg.norm(C.to_mesh(face, beta)[0], axis=1) - 1).mean()
+        >>> phong = np.abs(np.linalg.norm(C.phong_point(face, beta), axis=1) - 1).mean()
+        >>> bool(phong < 0.6 * flat)                     # closer to the sphere it samples
+        True
         """
         C = self._corners[face]
         q = (beta[:, 0, None] * C[:, 0, 0:3] + beta[:, 1, None] * C[:, 1, 0:3]
@@ -190,7 +227,18 @@ class Correspondence:
 
     def sample_barycentric(self, n: int, rng=None):
         """Faces ``(n,)`` and barycentric coordinates ``(n, 3)`` of ``n`` points uniform by
-        area on the mesh (the draw that :meth:`sample` makes)."""
+        area on the mesh (the draw that :meth:`sample` makes).
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> face, beta = C.sample_barycentric(5, rng=1)
+        >>> p, q, n = C.sample(5, rng=1)                 # the same draw
+        >>> bool(np.allclose(C.to_sphere(face, beta), p))
+        True
+        """
         n = check_positive_int(n, "n", minimum=0)
         g = as_generator(rng)
         face = _draw(self._cum, n, g)
@@ -210,6 +258,15 @@ class Correspondence:
         p : (n, 3) float array, sphere points, ``|p| = 1``
         q : (n, 3) float array, the corresponding mesh points
         normals : (n, 3) float array, unit, barycentric interpolation of vertex normals
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> p, q, n = C.sample(100, rng=0)
+        >>> p.shape, q.shape, bool(np.allclose(np.linalg.norm(n, axis=1), 1.0))
+        ((100, 3), (100, 3), True)
         """
         n = check_positive_int(n, "n", minimum=0)
         g = as_generator(rng)
@@ -236,6 +293,16 @@ class Correspondence:
         -------
         face : (k,) int array
         beta : (k, 3) float array, non-negative, rows sum to 1
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> face, beta = C.sample_barycentric(50, rng=0)
+        >>> f2, b2 = C.locate(C.to_sphere(face, beta))          # the inverse of to_sphere
+        >>> bool(np.array_equal(f2, face)), bool(np.allclose(b2, beta))
+        (True, True)
         """
         return self.locator.locate(p)
 
@@ -246,6 +313,15 @@ class Correspondence:
         -------
         q : (k, 3) float array
         normals : (k, 3) float array, unit
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> Vs, F = icosphere(2)
+        >>> C = Correspondence(Vs * [1.0, 1.0, 2.0], F, Vs)
+        >>> q, n = C.mesh_point(np.array([[0.0, 0.0, 1.0]]))     # the north pole
+        >>> q.round(6).tolist()
+        [[0.0, 0.0, 2.0]]
         """
         face, beta = self.locate(p)
         return self.to_mesh(face, beta)

@@ -32,7 +32,7 @@ from ..nn.optim import Schedule, make_optimizer
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
-__all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "DEFAULTS"]
+__all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "detail", "DEFAULTS"]
 
 #: default fitting options (docs/fitting.md explains and measures each choice)
 DEFAULTS = dict(
@@ -46,7 +46,18 @@ DEFAULTS = dict(
 
 @dataclass
 class FitReport:
-    """What a fit did and how well it fits held-out points (in the input's units)."""
+    """What a fit did and how well it fits held-out points (in the input's units).
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Ellipsoid
+    >>> S, report = fit_shape(Ellipsoid(1.0, 1.3, 0.7), width=16, depth=1, steps=20,
+    ...                       batch=256, n_eval=500, progress=False)
+    >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
+    (20, 'step budget', 4.0)
+    >>> sorted(report.choices)                         # what "auto" chose, and why
+    ['detail', 'input_scale', 'lr', 'warmup']
+    """
 
     steps: int = 0
     seconds: float = 0.0
@@ -72,7 +83,15 @@ class FitReport:
     GOALS = {"normal_mean_deg": 1.5, "position_relative": 1e-3}
 
     def add_quality_notes(self):
-        """Note the goals a fit missed, and whether its budget is what limited it."""
+        """Note the goals a fit missed, and whether its budget is what limited it.
+
+        Examples
+        --------
+        >>> r = FitReport(steps=10, seconds=1.0, stopped="step budget", position_mean=0.1,
+        ...               bbox_diagonal=1.0, normal_mean_deg=3.0).add_quality_notes()
+        >>> r.notes[0][:50]
+        'the step budget (10 steps, 1 s) was too short to r'
+        """
         missed = []
         if self.normal_mean_deg > self.GOALS["normal_mean_deg"]:
             missed.append(f"normal error {self.normal_mean_deg:.2f} deg > "
@@ -91,6 +110,16 @@ class FitReport:
         return self.position_mean / self.bbox_diagonal
 
     def summary(self) -> str:
+        """The report in a few lines: steps, time, held-out errors and notes.
+
+        Examples
+        --------
+        >>> r = FitReport(steps=10, seconds=1.0, stopped="step budget", position_mean=1e-4,
+        ...               position_rms=1e-4, position_max=3e-4, bbox_diagonal=1.0,
+        ...               normal_mean_deg=0.5, normal_max_deg=2.0)
+        >>> r.summary()[:40]
+        '10 steps in 1.0 s (step budget); held-ou'
+        """
         return (f"{self.steps} steps in {self.seconds:.1f} s ({self.stopped}); held-out "
                 f"position error mean {self.position_mean:.3g} (= {self.position_relative:.2e}"
                 f" of the bbox diagonal), RMS {self.position_rms:.3g}, max "
@@ -98,6 +127,15 @@ class FitReport:
                 f"{self.normal_max_deg:.2f} deg" + "".join(f"\nnote: {n}" for n in self.notes))
 
     def to_json(self) -> dict:
+        """The report as a JSON-serialisable dict (kept in the model's metadata).
+
+        Examples
+        --------
+        >>> import json
+        >>> d = FitReport(steps=3, bbox_diagonal=2.0, position_mean=0.1).to_json()
+        >>> d["steps"], d["position_relative"], len(json.dumps(d)) > 0
+        (3, 0.05, True)
+        """
         d = asdict(self)
         d["history"] = {k: list(map(float, v)) for k, v in self.history.items()}
         d["position_relative"] = self.position_relative
@@ -202,6 +240,15 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
     -------
     surface : SphericalNeuralSurface, in the mesh's units, float64
     report : FitReport (held-out errors against the mesh)
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Ellipsoid
+    >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    >>> S, report = fit_mesh(V, F, width=16, depth=1, steps=30, batch=256, n_eval=500,
+    ...                      progress=False)            # tiny; the defaults adapt to the mesh
+    >>> S(np.array([[0.0, 0.0, 1.0]])).shape, report.steps, S.metadata["smooth"]
+    ((1, 3), 30, 'phong')
     """
     check_choice(smooth, "smooth", {"phong", "none"})
     _check_early(options)
@@ -219,6 +266,15 @@ def fit_shape(shape, **options):
 
     Sphere points are drawn uniformly; targets are ``shape(p)`` and its exact normals.
     Options as :func:`fit_sampler`. Returns (surface, report).
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> S, report = fit_shape(Sphere(2.0), width=16, depth=1, steps=100, batch=256,
+    ...                       n_eval=500, progress=False)
+    >>> x = S(np.array([[0.0, 0.0, 1.0]]))
+    >>> bool(abs(np.linalg.norm(x) - 2.0) < 0.1)       # in the shape's units
+    True
     """
     _check_early(options)
     target = _ShapeTarget(shape)
@@ -309,6 +365,16 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     -------
     (SphericalNeuralSurface, FitReport)
         The report's ``choices`` say what the options left unset became and why.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Ellipsoid
+    >>> from sns_np.surface.fit import _ShapeTarget
+    >>> target = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))  # any object with the methods above
+    >>> S, report = fit_sampler(target, width=16, depth=1, time_budget=1.0, batch=256,
+    ...                         n_eval=500, progress=False)    # steps sized by the clock
+    >>> report.stopped, report.choices["steps"]["value"] == report.steps
+    ('time budget', True)
     """
     o = dict(DEFAULTS)
     given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
@@ -513,6 +579,15 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
     with ears, horns and faces are not (spot: 4.8e-2). It costs one forward pass of ``n``
     points and a ``width x width`` solve, and draws from its own generator, so it does not
     change a fit's random stream.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Bobble, Ellipsoid
+    >>> from sns_np.surface.fit import _ShapeTarget
+    >>> smooth = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7)))
+    >>> bumpy = detail(_ShapeTarget(Bobble()))
+    >>> bool(smooth < DETAIL_RANGE[0]), bool(bumpy > DETAIL_RANGE[1])
+    (True, True)
     """
     g = np.random.default_rng(seed)
     net = ResidualMLP(width=width, depth=depth, seed=g, input_scale=4.0)

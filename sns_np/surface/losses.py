@@ -35,6 +35,12 @@ def normals_from_tangents(Su, Sv):
     -------
     n : (n, 3) float array
     norm : (n,) float array
+
+    Examples
+    --------
+    >>> n, norm = normals_from_tangents(np.array([[2.0, 0, 0]]), np.array([[0, 3.0, 0]]))
+    >>> n.tolist(), norm.tolist()
+    ([[0.0, 0.0, 1.0]], [6.0])
     """
     c = np.cross(Su, Sv)
     norm = np.linalg.norm(c, axis=1)
@@ -62,6 +68,17 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     dy : (c, 3) float array
     dJD : (c, 3, 2) float array or None
     parts : dict with the chunk's summed squared position and normal errors
+
+    Examples
+    --------
+    >>> y = np.array([[1.0, 0.0, 0.0]])
+    >>> JD = np.array([[[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])      # S_u = e_y, S_v = e_z
+    >>> q, nt = np.array([[1.5, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
+    >>> loss, dy, dJD, parts = position_normal_loss(y, JD, q, nt, 1, normal_weight=1.0)
+    >>> loss, dy.tolist()                            # the normal (1, 0, 0) already agrees
+    (0.25, [[-1.0, 0.0, 0.0]])
+    >>> position_normal_loss(y, JD, q, nt, 1, 1.0, tangent_weight=0.1)[0]   # all normal
+    0.25
     """
     r = scale * y - q
     sq_pos = float(np.einsum("ij,ij->", r, r))
