@@ -832,7 +832,8 @@ def _evaluate(surface, target, n_eval):
 def _resume_key(target, o, net):
     keep = {k: o[k] for k in ("width", "depth", "steps", "batch", "lr", "lr_min", "optimizer",
                               "schedule", "warmup", "normal_weight", "dtype", "init",
-                              "input_scale")}
+                              "input_scale", "tangent_weight", "readout_every", "readout")}
+    keep["smooth"] = getattr(target, "smooth", None)
     keep["seed"] = o["seed"] if isinstance(o["seed"], (int, np.integer)) else "generator"
     keep["target"] = target.fingerprint
     keep["warm_start"] = None if net is None else _fingerprint(net.theta, None)
