@@ -2,7 +2,7 @@
 
 * ``test_doctest`` runs the ``Examples`` of every docstring of the package (each docstring
   is one test case), so that ``python -m pytest -q tests``, the README's test command and
-  CI's, checks them. Examples use tiny networks and budgets: the whole set takes about 30 s
+  CI's, checks them. Examples use tiny networks and budgets: the whole set takes about 40 s
   (``tox -e nojit`` leaves them out: without the JIT their small fits take minutes).
 * ``test_every_public_definition_has_an_example`` lists the public definitions (the names in
   each public module's ``__all__`` and the public methods of those classes) whose numpydoc
