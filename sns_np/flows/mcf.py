@@ -71,13 +71,15 @@ class MeanCurvatureFlowResult:
 
     Examples
     --------
-    >>> from sns_np.shapes import Sphere
-    >>> from sns_np.surface import fit_shape
-    >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
-    >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
-    ...                           n_snapshots=2, stability="ignore")
-    >>> len(res), res.times.tolist(), len(res.surfaces), res.stopped
-    (3, [0.0, 0.01, 0.02], 3, 't_end')
+    What :func:`mean_curvature_flow` returns (its example runs a flow); by hand, with two
+    unfitted surfaces standing in for the snapshots:
+
+    >>> from sns_np.nn import ResidualMLP
+    >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0))
+    >>> res = MeanCurvatureFlowResult(times=np.array([0.0, 0.01]), surfaces=[S, S],
+    ...                               areas=np.array([12.57, 12.07]))
+    >>> len(res), res.times.tolist(), res.stopped
+    (2, [0.0, 0.01], 't_end')
     """
 
     times: np.ndarray
@@ -99,12 +101,11 @@ class MeanCurvatureFlowResult:
 
         Examples
         --------
-        >>> from sns_np.shapes import Sphere
-        >>> from sns_np.surface import fit_shape
-        >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
         >>> import os
-        >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
-        ...                           n_snapshots=1, stability="ignore")
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0))
+        >>> res = MeanCurvatureFlowResult(times=np.array([0.0, 0.01]), surfaces=[S, S],
+        ...                               areas=np.array([12.57, 12.07]))
         >>> sorted(os.listdir(res.save("mcf_out", level=1)))
         ['flow.json', 'mcf_000.npz', 'mcf_000.ply', 'mcf_001.npz', 'mcf_001.ply']
         """
@@ -127,14 +128,14 @@ class MeanCurvatureFlowResult:
 
         Examples
         --------
-        >>> from sns_np.shapes import Sphere
-        >>> from sns_np.surface import fit_shape
-        >>> S, _ = fit_shape(Sphere(), width=16, depth=1, steps=100, batch=256, progress=False)
-        >>> res = mean_curvature_flow(S, 0.02, 0.01, refit_steps=5, n_points=128, rng=0,
-        ...                           n_snapshots=1, stability="ignore")
+        >>> from sns_np.nn import ResidualMLP
+        >>> S = SphericalNeuralSurface(ResidualMLP(width=8, depth=1, seed=0))
+        >>> res = MeanCurvatureFlowResult(times=np.array([0.0, 0.01]), surfaces=[S, S],
+        ...                               areas=np.array([12.57, 12.07]), steps=1,
+        ...                               info={"n_points": 128})
         >>> d = res.summary_dict()
-        >>> d["flow"], d["steps"], d["n_points"], len(d["areas"])
-        ('mean_curvature', 2, 128, 2)
+        >>> d["flow"], d["steps"], d["n_points"], d["areas"]
+        ('mean_curvature', 1, 128, [12.57, 12.07])
         """
         return {"flow": "mean_curvature", "times": [float(t) for t in self.times],
                 "areas": [float(a) for a in self.areas], "steps": self.steps,
