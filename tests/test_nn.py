@@ -36,9 +36,12 @@ def test_softplus_kernel_matches_numpy_reference():
     out = np.empty_like(z)
     K.softplus_values(z, out)
     ref = softplus(z)
-    big = np.abs(z) < 700
-    assert np.max(np.abs(out - ref)[big] / np.abs(ref[big])) < 1e-14
-    assert np.max(np.abs(out - ref)) < 1e-300 + 1e-12 * np.max(np.abs(ref))
+    kept = (z < 700) & (z >= -K._FLUSH_Z)
+    assert np.max(np.abs(out - ref)[kept] / np.abs(ref[kept])) < 1e-14
+    # below -_FLUSH_Z softplus is flushed to 0: an absolute error under 1e-30
+    flushed = z < -K._FLUSH_Z
+    assert (out[flushed] == 0).all() and ref[flushed].max() < 1e-30
+    assert np.max(np.abs(out - ref)) < 1e-30 + 1e-12 * np.max(np.abs(ref))
     assert np.allclose(sigmoid(z), np.exp(-np.logaddexp(0, -z)), rtol=1e-14, atol=0)
     s, s1, s2, s3 = softplus_derivatives(np.array([0.0]))
     assert np.allclose([s[0], s1[0], s2[0], s3[0]], [np.log(2), 0.5, 0.25, 0.0])
