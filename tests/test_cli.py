@@ -186,8 +186,12 @@ def test_fit_info_and_resume(files, tmp_path, capsys):
     y = S(np.eye(3))                                         # the axes land near the ellipsoid
     assert np.allclose(np.abs(np.diag(y)), [1.0, 1.3, 0.7], atol=0.2)
 
+    assert "measured detail" in out and "chosen input_scale = 4 (smooth target)" in out
+    assert "chosen lr = 0.0001" in out and "note: the step budget" in out
+
     code, out, _ = run(["info", model], capsys)
     assert code == 0 and "fit: 5 steps" in out and '"width": 16' in out
+    assert "chosen warmup = 50 (smooth target)" in out and "note: the step budget" in out
 
     # --input-scale reaches the initialisation (W0 ~ N(0, (scale / sqrt(3))^2)) and the record
     wide = tmp_path / "wide.npz"
@@ -298,15 +302,14 @@ def test_bad_input_one_line_status_2_no_output(case, files, tmp_path, capsys):
     assert sorted(files.iterdir()) == before
 
 
-@pytest.mark.parametrize("normal_deg, scale, expect", [(13.6, 4.0, True), (13.6, 40.0, False),
-                                                       (1.0, 4.0, False),
-                                                       (float("nan"), 4.0, False)])
-def test_fit_prints_the_input_scale_hint_only_when_it_applies(normal_deg, scale, expect):
-    from sns_np.cli import _input_scale_hint
-    from sns_np.surface import FitReport
+def test_choice_lines_name_what_was_measured_and_chosen():
+    from sns_np.cli import _choice_lines
 
-    hint = _input_scale_hint(FitReport(normal_mean_deg=normal_deg,
-                                       options={"input_scale": scale}))
-    assert (hint is not None) == expect
-    if expect:
-        assert "--input-scale 40" in hint and "13.6 deg" in hint
+    lines = _choice_lines({"detail": {"value": 0.046, "why": "detailed"},
+                           "lr": {"value": 0.004, "why": "detailed target"},
+                           "steps": {"value": 1598, "why": "as many as fit"},
+                           "bad": "not a dict", "esc": {"value": "\x1b[2J", "why": "x"}})
+    assert lines[0] == "  measured detail = 0.046 (detailed)"
+    assert lines[1] == "  chosen lr = 0.004 (detailed target)"
+    assert lines[2] == "  chosen steps = 1598 (as many as fit)"
+    assert len(lines) == 4 and "\x1b" not in lines[3]      # escapes are not printed raw
