@@ -12,7 +12,7 @@ Run (from the project root):
     python examples/fit_mesh.py --help
 
 The default budget is the library's: a 256 x 8 network, and a time budget chosen from the
-mesh's detail (200 s for a smooth mesh, 540 s for a detailed one; docs/fitting.md), as are the
+mesh's detail (240 s for a smooth mesh, 540 s for a detailed one; docs/fitting.md), as are the
 first layer's scale and the learning rate. --time-budget, --steps, --width and --depth trade
 accuracy for time.
 SNS_NP_SMOKE=1 uses a 32 x 2 network and 50 steps: seconds, and a rough surface.

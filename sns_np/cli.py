@@ -50,7 +50,7 @@ def _add_fit_options(p):
                    help="step budget (default: as many as fit the time budget)")
     g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
                    help="seconds of fitting (default: chosen from the mesh's detail, "
-                        "200 s in all for a smooth mesh, 540 s for a detailed one)")
+                        "240 s in all for a smooth mesh, 540 s for a detailed one)")
     g.add_argument("--tol", type=_positive_float,
                    help="stop when the running RMS position error (relative to the "
                         "normalised size) is below this")

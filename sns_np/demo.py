@@ -103,7 +103,7 @@ def run_demo(level=4, out=None, progress=True, print_fn=print, **fit_options):
     Examples
     --------
     >>> figures = run_demo(level=2, width=16, depth=1, steps=20, batch=256, progress=False,
-    ...                    print_fn=lambda line: None)            # tiny: the default fits 200 s
+    ...                    print_fn=lambda line: None)            # tiny: the default fits 240 s
     >>> isinstance(figures, dict) and len(figures) > 0
     True
     """

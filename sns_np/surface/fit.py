@@ -330,7 +330,7 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         ears, horns and faces), interpolated in between (docs/fitting.md).
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step). Default when ``steps`` is not given either:
-        chosen from the target's detail, 200 s (smooth) to 540 s (detailed) in all, less the
+        chosen from the target's detail, 240 s (smooth) to 540 s (detailed) in all, less the
         ``elapsed_before`` seconds already spent (the embedding). A ``steps`` that this budget
         cannot reach is refused before the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
     tangent_weight : float
@@ -532,7 +532,7 @@ DETAIL_RANGE = (5e-3, 2e-2)
 
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
-    "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 200.0},
+    "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0},
 }
 
