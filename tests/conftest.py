@@ -26,3 +26,14 @@ def sphere_points(n, seed=0):
     g = np.random.default_rng(seed)
     p = g.standard_normal((n, 3))
     return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def run_cli(argv, capsys):
+    """Run the ``sns-np`` command in-process; returns (exit status, stdout, stderr)."""
+    from sns_np.cli import main
+    try:
+        code = main([str(a) for a in argv])
+    except SystemExit as exc:        # argparse: --help, --version and option errors
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err

@@ -12,24 +12,18 @@ import numpy as np
 import pytest
 
 from sns_np import __version__
-from sns_np.cli import main
 from sns_np.mesh import icosphere, load, orientation_determinants, write_mesh
 from sns_np.nn import ResidualMLP
 from sns_np.shapes import Ellipsoid
 from sns_np.surface import SphericalNeuralSurface
 
+from .conftest import run_cli
+
 COMMANDS = ["demo", "embed", "fit", "eval", "info", "eigen"]
 TINY_FIT = ["--steps", "5", "--width", "16", "--depth", "1", "--quiet"]
 
 
-def run(argv, capsys):
-    """Run the command in-process; returns (exit status, stdout, stderr)."""
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:        # argparse: --help, --version and option errors
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+run = run_cli
 
 
 # ------------------------------------------------------------------------------ fixtures

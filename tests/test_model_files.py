@@ -15,11 +15,12 @@ import zipfile
 import numpy as np
 import pytest
 
-from sns_np.cli import main
 from sns_np.errors import ModelFileError
 from sns_np.fields import NeuralField
 from sns_np.nn import ResidualMLP
 from sns_np.surface import SphericalNeuralSurface
+
+from .conftest import run_cli
 
 MB = 1 << 20
 
@@ -239,13 +240,7 @@ def test_round_trip_of_fortran_and_compressed_files(tmp_path):
 
 # ------------------------------------------------------------------ the command line
 
-def _cli(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+_cli = run_cli
 
 
 def test_control_characters_are_not_printed_raw(tmp_path, capsys):

@@ -14,16 +14,12 @@ from sns_np.mesh import icosphere, write_mesh, written_field_names
 from sns_np.nn import ResidualMLP
 from sns_np.surface import SphericalNeuralSurface
 
+from .conftest import run_cli
+
 posix_only = pytest.mark.skipif(sys.platform == "win32", reason="POSIX permission bits")
 
 
-def run(argv, capsys):
-    try:
-        code = main([str(a) for a in argv])
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+run = run_cli
 
 
 @pytest.fixture
