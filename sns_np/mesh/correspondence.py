@@ -268,10 +268,7 @@ class Correspondence:
         >>> p.shape, q.shape, bool(np.allclose(np.linalg.norm(n, axis=1), 1.0))
         ((100, 3), (100, 3), True)
         """
-        n = check_positive_int(n, "n", minimum=0)
-        g = as_generator(rng)
-        face = _draw(self._cum, n, g)
-        beta = uniform_barycentric(n, g)
+        face, beta = self.sample_barycentric(n, rng)
         X = self._combine(self._corners, face, beta)
         return self._unit(X[:, 3:6]), X[:, 0:3], self._unit(X[:, 6:9])
 

@@ -80,13 +80,23 @@ class Schedule:
         if self.kind == "constant":
             lr = self.lr
         elif self.kind == "cosine":
-            frac = min(t, self.total) / self.total
-            lr = self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + math.cos(math.pi * frac))
+            lr = self.cosine_at(min(t, self.total) / self.total)
         else:
             lr = self.lr * self.gamma ** (t // self.every)
         if self.warmup and t < self.warmup:
             lr *= (t + 1) / self.warmup
         return lr
+
+    def cosine_at(self, frac: float) -> float:
+        """The cosine decay from ``lr`` to ``lr_min`` at the fraction ``frac`` (0 - 1) of its
+        length, without the warm-up (a fit with a time budget follows it on the clock).
+
+        Examples
+        --------
+        >>> Schedule("cosine", 1.0, total=10, lr_min=0.0).cosine_at(0.5)
+        0.5
+        """
+        return self.lr_min + 0.5 * (self.lr - self.lr_min) * (1.0 + math.cos(math.pi * frac))
 
     def __repr__(self):
         return f"Schedule({self.kind!r}, lr={self.lr:g})"

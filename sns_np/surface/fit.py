@@ -552,8 +552,7 @@ class _ClockCosine:
 
     def __call__(self, t):
         b = self.base
-        frac = min(self.clock() / self.budget, 1.0)
-        lr = b.lr_min + 0.5 * (b.lr - b.lr_min) * (1.0 + np.cos(np.pi * frac))
+        lr = b.cosine_at(min(self.clock() / self.budget, 1.0))
         if b.warmup and t < b.warmup:
             lr *= (t + 1) / b.warmup
         return float(lr)
