@@ -12,16 +12,25 @@ them). Folders likewise get ``0o777`` minus the umask, not ``mkdtemp``'s 0700.
 
 Temporary names are ``<name>.<random>.tmp`` beside the final file; :func:`stale_temporaries`
 lists those left behind by a killed process (``kill -9``), so that a later run can remove them.
+
+:func:`exclusive` keeps two processes from writing the same output at once: it holds an
+advisory lock on ``<name>.lock`` (``flock``; released by the kernel when the holder dies, even
+by ``kill -9``), and a second writer gets an :class:`OutputBusyError` naming the holder.
+Only the lock's holder may remove the stale temporaries of its output
+(:func:`remove_stale_temporaries`), since another live writer's temporaries look the same.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import shutil
+import socket
 from pathlib import Path
 
-__all__ = ["write_file", "write_folder", "stale_temporaries", "fsync_file", "fsync_dir"]
+__all__ = ["write_file", "write_folder", "stale_temporaries", "remove_stale_temporaries",
+           "exclusive", "OutputBusyError", "fsync_file", "fsync_dir"]
 
 
 def _temporary_name(path: Path) -> Path:
@@ -35,6 +44,81 @@ def stale_temporaries(path) -> list[Path]:
     if not parent.is_dir():
         return []
     return sorted(parent.glob(f"{_glob_escape(path.name)}.*.tmp"))
+
+
+def remove_stale_temporaries(path) -> list[Path]:
+    """Remove the temporaries of ``path`` left by a killed writer; returns what was removed.
+
+    Call it only while holding :func:`exclusive` on ``path``: a live writer's temporary file
+    has the same form of name.
+    """
+    removed = []
+    for tmp in stale_temporaries(path):
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+        removed.append(tmp)
+    return removed
+
+
+class OutputBusyError(OSError):
+    """Another process holds the lock of an output (see :func:`exclusive`)."""
+
+
+def _try_lock(fd) -> bool:
+    """Take a non-blocking exclusive lock on an open file; False when another holds it."""
+    try:
+        import fcntl
+    except ImportError:                                     # pragma: no cover - Windows
+        import msvcrt
+        try:
+            msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+        except OSError:
+            return False
+        return True
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except (BlockingIOError, PermissionError):
+        return False
+    return True
+
+
+@contextlib.contextmanager
+def exclusive(path):
+    """Hold the lock file ``<path>.lock`` while writing ``path``; yields the lock's path.
+
+    A second holder, in this process or another, gets an :class:`OutputBusyError` naming the
+    holder's process id and host. The lock file is removed on exit; one left by a killed
+    process is no longer locked and is simply taken over.
+    """
+    path = Path(path)
+    lock = path.with_name(path.name + ".lock")
+    while True:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        if not _try_lock(fd):
+            holder = os.read(fd, 200).decode(errors="replace").strip() or "unknown"
+            os.close(fd)
+            raise OutputBusyError(
+                f"{str(path)!r} is being written by another process ({holder}; lock file "
+                f"{str(lock)!r}); wait for it to finish or choose another output")
+        # a finishing holder may have removed the file between our open and our lock
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(lock))
+        except FileNotFoundError:
+            same = False
+        if same:
+            break
+        os.close(fd)
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"process {os.getpid()} on {socket.gethostname()}\n".encode())
+        yield lock
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(lock)                 # still holding it: no one can take it in between
+        os.close(fd)
 
 
 def _glob_escape(name: str) -> str:

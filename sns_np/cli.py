@@ -7,7 +7,10 @@ meshes, models) are reported as one line on stderr with exit status 2.
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from ._version import __version__
@@ -122,12 +125,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("fit", help="fit a neural surface to a mesh",
                        description="Fit a SphericalNeuralSurface to a closed genus-0 mesh and "
-                       "save it as .npz. Interrupt with Ctrl-C and rerun with --resume to "
-                       "continue from the last checkpoint.")
+                       "save it as .npz. Ctrl-C or SIGTERM stops it between two steps and "
+                       "saves a checkpoint; rerun the same command with --resume to continue. "
+                       "The checkpoint is also written every --checkpoint-every seconds, so a "
+                       "crash loses at most that much work, and is removed once the model is "
+                       "saved.")
     p.add_argument("mesh", help="input mesh (.obj, .off, .ply, .stl)")
     p.add_argument("-o", "--output", required=True, help="output model (.npz)")
     p.add_argument("--checkpoint", help="checkpoint file (.npz; default OUTPUT.ckpt.npz)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint")
+    p.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
+                   help="write the checkpoint at least this often (default: %(default)g s; "
+                        "also every 500 steps)")
+    p.add_argument("--keep-checkpoint", action="store_true",
+                   help="keep the checkpoint after a successful fit (default: remove it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     _add_fit_options(p)
     p.set_defaults(func=_cmd_fit)
@@ -220,8 +231,11 @@ def _check_output(path, suffixes):
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise ValueError(f"output {path.name!r} must end in one of {', '.join(suffixes)}")
-    if path.parent and not path.parent.exists():
-        raise ValueError(f"output folder {str(path.parent)!r} does not exist")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"output folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"output folder {str(folder)!r} is not writable")
     return path
 
 
@@ -252,24 +266,51 @@ def _cmd_embed(args):
 
 
 def _cmd_fit(args):
+    from ._atomic import exclusive, remove_stale_temporaries
+    from .errors import FitInterrupted
     from .mesh import load
     from .surface import fit_mesh
+    # names checked now, not at the first write many minutes into the fit
     out = _check_output(args.output, (".npz",))
-    # checked now, not at the first checkpoint write many steps into the fit
     ckpt = (_check_output(args.checkpoint, (".npz",)) if args.checkpoint
             else out.with_suffix(".ckpt.npz"))
     if args.resume and not ckpt.exists():
         raise ValueError(f"--resume: no checkpoint at {ckpt}")
-    V, F = load(args.mesh)
-    surface, report = fit_mesh(V, F, checkpoint=ckpt, resume=args.resume,
-                               progress=not args.quiet, source=str(Path(args.mesh).resolve()),
-                               **_fit_kwargs(args))
-    surface.save(out)
+    with exclusive(out):                          # a second fit to the same output is refused
+        for tmp in remove_stale_temporaries(out):
+            print(f"removed {tmp}, left by an interrupted run", file=sys.stderr)
+        V, F = load(args.mesh)
+        try:
+            surface, report = fit_mesh(
+                V, F, checkpoint=ckpt, resume=args.resume, checkpoint_seconds=args.checkpoint_every,
+                progress=not args.quiet, source=str(Path(args.mesh).resolve()),
+                **_fit_kwargs(args))
+        except FitInterrupted as exc:
+            if exc.checkpoint is None:
+                raise
+            raise _Interrupted(f"interrupted by {exc.signal_name} after step {exc.step}; the "
+                               f"checkpoint {exc.checkpoint} holds it: rerun the same command "
+                               f"with --resume to continue", exc.signal_name) from None
+        surface.save(out)
+        if not args.keep_checkpoint:
+            ckpt.unlink(missing_ok=True)
     for line in _choice_lines(report.choices):
         print(line)
     print(report.summary())
-    print(f"wrote {out} (checkpoint {ckpt})")
+    print(f"wrote {out}" + (f" (checkpoint kept: {ckpt})" if args.keep_checkpoint else ""))
     return 0
+
+
+class _Interrupted(KeyboardInterrupt):
+    """An interrupt with the message the user should see and the signal's name."""
+
+    def __init__(self, message, signal_name="SIGINT"):
+        super().__init__(message)
+        self.signal_name = signal_name
+
+
+def _raise_on_sigterm(signum, frame):
+    raise _Interrupted("terminated (SIGTERM)", "SIGTERM")
 
 
 def _choice_lines(choices):
@@ -471,15 +512,25 @@ def main(argv=None) -> int:
     if getattr(args, "command", None) is None:
         parser.print_help()
         return 0
+    # SIGTERM unwinds like Ctrl-C, so that partial outputs are cleaned up and a fit saves
+    # its checkpoint (the main thread only: signal handlers cannot be set elsewhere)
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _raise_on_sigterm)
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print(f"sns-np {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        name = getattr(exc, "signal_name", "SIGINT")
+        message = str(exc) if isinstance(exc, _Interrupted) else "interrupted"
+        print(f"sns-np {args.command}: {message}", file=sys.stderr)
+        return 143 if name == "SIGTERM" else 130
     except (ValueError, OSError, ImportError) as exc:
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         print(f"sns-np {args.command}: error: {msg}", file=sys.stderr)
         return 2
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":  # pragma: no cover

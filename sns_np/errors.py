@@ -27,3 +27,18 @@ class DegenerateMapError(SNSError):
 
 class DivergenceError(SNSError, ArithmeticError):
     """An optimisation or time integration produced non-finite values or exploded."""
+
+
+class FitInterrupted(KeyboardInterrupt):
+    """A fit stopped by Ctrl-C (SIGINT) or SIGTERM, between two optimiser steps.
+
+    It is a :class:`KeyboardInterrupt`, so code that handles Ctrl-C handles it too.
+    ``step`` is the last completed step, ``checkpoint`` the file that holds it (None when the
+    fit had no checkpoint) and ``signal_name`` the signal's name ("SIGINT", "SIGTERM").
+    """
+
+    def __init__(self, step, checkpoint=None, signal_name="SIGINT"):
+        self.step, self.checkpoint, self.signal_name = step, checkpoint, signal_name
+        saved = (f"the checkpoint {str(checkpoint)!r} holds it (resume=True continues the fit)"
+                 if checkpoint is not None else "no checkpoint was asked for")
+        super().__init__(f"fit interrupted by {signal_name} after step {step}; {saved}")

@@ -170,7 +170,12 @@ def test_fit_info_and_resume(files, tmp_path, capsys):
     argv = ["fit", files / "ellipsoid.obj", "-o", model, *TINY_FIT]
     code, out, err = run(argv, capsys)
     assert code == 0 and err == ""
-    assert model.exists() and (tmp_path / "fit.ckpt.npz").exists()
+    # the checkpoint goes once the model is saved, and no lock or temporary file stays
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.npz"]
+    argv += ["--keep-checkpoint"]
+    code, out, err = run(argv, capsys)
+    assert code == 0 and err == "" and "checkpoint kept" in out
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fit.ckpt.npz", "fit.npz"]
     S = SphericalNeuralSurface.load(model)
     assert (S.net.width, S.net.depth) == (16, 1)
     fit = S.metadata["fit"]

@@ -284,7 +284,7 @@ def test_resume_from_a_crafted_checkpoint_is_one_line(tmp_path, capsys):
     write_mesh(mesh, V, F)
     out = tmp_path / "fit.npz"
     argv = ["fit", mesh, "-o", out, "--steps", "2", "--width", "8", "--depth", "1", "--quiet"]
-    code, _, err = _cli(argv, capsys)
+    code, _, err = _cli(argv + ["--keep-checkpoint"], capsys)
     assert code == 0, err
     ckpt = tmp_path / "fit.ckpt.npz"
     with np.load(ckpt) as data:

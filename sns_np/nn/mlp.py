@@ -905,7 +905,7 @@ def _unpack_streams(Y, order, m, k):
 def save_npz(path, arrays: dict) -> Path:
     """Write ``arrays`` to ``path`` (.npz) through a temporary file, fsync and an atomic rename."""
     path = Path(path)
-    if path.suffix != ".npz":
+    if path.suffix.lower() != ".npz":
         raise ValueError(f"model files must end in .npz, got {path.name!r}")
 
     def write(tmp):

@@ -15,17 +15,21 @@ measured accuracy), and the returned surface is converted to float64 for evaluat
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
+from .._atomic import exclusive, remove_stale_temporaries
 from .._progress import Progress
+from .._signals import deferred_signals
 from .._validation import as_generator, check_choice, check_positive_float, check_positive_int
-from ..errors import DivergenceError, ModelFileError
+from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
 from ..nn.optim import Schedule, make_optimizer
@@ -288,8 +292,9 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
                 normal_weight=None, dtype=None, init=None, input_scale=None, time_budget=None,
                 tol=None, tangent_weight=None, readout_every=None,
                 readout=None, elapsed_before=0.0,
-                n_eval=None, seed=None, checkpoint=None, checkpoint_every=500, resume=False,
-                progress=True, callback=None, history_every=50):
+                n_eval=None, seed=None, checkpoint=None, checkpoint_every=500,
+                checkpoint_seconds=60.0, resume=False, progress=True, callback=None,
+                history_every=50):
     """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
 
     Parameters
@@ -349,9 +354,15 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     seed : int or Generator
         Seed of initialisation and sampling (default 0).
     checkpoint : path, optional
-        .npz file written atomically every ``checkpoint_every`` steps, on interruption
-        (KeyboardInterrupt) and at the end; with ``resume=True`` an existing checkpoint for the
-        same target and options is continued from its step.
+        .npz file written atomically every ``checkpoint_every`` steps or ``checkpoint_seconds``
+        seconds, whichever comes first, on interruption and at the end (the file is kept: the
+        caller removes it once the model is saved). With ``resume=True`` an existing
+        checkpoint of the same target and options is continued from its step, bit for bit.
+        While the fit runs it holds ``<checkpoint>.lock``: a second fit with the same
+        checkpoint is refused (:class:`~sns_np._atomic.OutputBusyError`), and temporary files
+        that a killed fit left beside the checkpoint are removed.
+    checkpoint_every, checkpoint_seconds : int, float
+        Checkpoint cadence (500 steps, 60 s): a crash loses at most about a minute.
     progress : bool
         Show a progress line on stderr.
     callback : callable ``callback(step, info) -> bool``, optional
@@ -365,6 +376,16 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     -------
     (SphericalNeuralSurface, FitReport)
         The report's ``choices`` say what the options left unset became and why.
+
+    Raises
+    ------
+    FitInterrupted
+        On Ctrl-C (SIGINT) or SIGTERM. The signal is acted on between two optimiser steps,
+        never inside an update; the checkpoint, if any, then holds the last completed step.
+        A second signal stops at once (the checkpoint then holds the last periodic save).
+    DivergenceError
+        When the loss or gradient is not finite; the checkpoint, if any, then holds the last
+        good step.
 
     Examples
     --------
@@ -385,127 +406,160 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
                  tol=tol, n_eval=n_eval, seed=seed)
     o.update({k: v for k, v in given.items() if v is not None})
     _check_options(o)
+    _check_checkpoint_options(checkpoint, checkpoint_every, checkpoint_seconds)
     t_dtype = np.dtype(o["dtype"])
     choices = _plan(target, o, {k for k, v in given.items() if v is not None}, net,
                     elapsed=elapsed_before)
     rng = as_generator(o["seed"])
     key = _resume_key(target, o, net)
-
-    state = None
-    if checkpoint is not None and resume and os.path.exists(checkpoint):
-        state = _load_checkpoint(checkpoint, key)
-    if state is not None:
-        net = state["net"].astype(t_dtype)
-        rng.bit_generator.state = state["rng"]
-        start, history, elapsed0 = state["step"], state["history"], state["seconds"]
-    else:
-        if net is None:
-            net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype,
-                              input_scale=o["input_scale"])
-            if o["init"] == "ridge":
-                _ridge_readout(net, target, rng)
-        else:
-            net = net.astype(t_dtype)
-        start, history, elapsed0 = 0, {k: [] for k in ("step", "loss", "position_rms",
-                                                      "normal_deg", "lr", "seconds")}, 0.0
-    opt = make_optimizer(o["optimizer"], _schedule(o))
-    if state is not None:
-        opt.load_state_dict(state["opt"])
-
-    # with no step count the schedule runs on the clock: its decay ends with the time budget
-    auto_steps = o["steps"] is None
-    total = o["steps"] if not auto_steps else _MAX_AUTO_STEPS
-    if auto_steps and o["schedule"] == "cosine":
-        opt.schedule = _ClockCosine(opt.schedule, lambda: time.perf_counter() - t0,
-                                    o["time_budget"])
-    bar = Progress(total if not auto_steps else 1, "fit", enabled=progress)
-    t0 = time.perf_counter() - elapsed0
-    w = o["normal_weight"]
-    tw = o["tangent_weight"]
-    order = 1 if w else 0
-    ema_pos = ema_nrm = None
-    stopped = "step budget"
-    step = start
-    last_loss = float("nan")
-
-    def write_checkpoint():
+    with contextlib.ExitStack() as hold:
         if checkpoint is not None:
-            _save_checkpoint(checkpoint, net, opt, rng, step, history, time.perf_counter() - t0,
-                             key, target, metadata)
-
-    try:
-        while step < total:
-            p, q, nt = target.sample(o["batch"], rng)
-            R = tangent_frame(p) if order else None
-            pc = p.astype(t_dtype)
-            qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
-            parts = {"position": 0.0, "normal": 0.0}
-
-            def loss_fn(y, JD, sl):
-                val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p), w,
-                                                        tangent_weight=tw)
-                parts["position"] += pr["position"]
-                parts["normal"] += pr["normal"]
-                return val, dy, dJD
-
-            loss, grad = net.value_and_grad(pc, loss_fn, order=order,
-                                            directions=None if R is None else R.astype(t_dtype))
-            if not np.isfinite(loss) or not np.all(np.isfinite(grad)):
-                stopped = "diverged"
-                raise DivergenceError(
-                    f"fit diverged at step {step} (loss {loss}); the parameters of the last "
-                    f"good step are kept" + (f" in {checkpoint}" if checkpoint else ""))
-            lr_now = opt.lr()
-            opt.step(net.theta, grad)
-            step += 1
-            if o["readout_every"] and step % o["readout_every"] == 0:
-                if o["readout"] == "gn":
-                    _gauss_newton_readout(net, target, rng, w, tw)
-                else:
+            hold.enter_context(exclusive(checkpoint))       # one fit per checkpoint at a time
+            remove_stale_temporaries(checkpoint)            # left by a killed fit
+        state = None
+        if checkpoint is not None and resume and os.path.exists(checkpoint):
+            state = _load_checkpoint(checkpoint, key)
+        if state is not None:
+            net = state["net"].astype(t_dtype)
+            rng.bit_generator.state = state["rng"]
+            start, history, elapsed0 = state["step"], state["history"], state["seconds"]
+        else:
+            if net is None:
+                net = ResidualMLP(width=o["width"], depth=o["depth"], seed=rng, dtype=t_dtype,
+                                  input_scale=o["input_scale"])
+                if o["init"] == "ridge":
                     _ridge_readout(net, target, rng)
-            last_loss = loss
-            pos_ms = parts["position"] / len(p)
-            nrm_ms = parts["normal"] / len(p)
-            ema_pos = pos_ms if ema_pos is None else 0.95 * ema_pos + 0.05 * pos_ms
-            ema_nrm = nrm_ms if ema_nrm is None else 0.95 * ema_nrm + 0.05 * nrm_ms
-            pos_rms = float(np.sqrt(ema_pos))
-            # |n - n_t|^2 = 2 - 2 cos(angle)  ->  angle = 2 asin(|n - n_t| / 2)
-            nrm_deg = float(np.degrees(2 * np.arcsin(min(1.0, np.sqrt(ema_nrm) / 2))))
-            elapsed = time.perf_counter() - t0
-            if step % history_every == 0 or step == total:
-                for k, v in (("step", step), ("loss", loss), ("position_rms", pos_rms),
-                             ("normal_deg", nrm_deg), ("lr", lr_now), ("seconds", elapsed)):
-                    history[k].append(float(v))
-                if callback is not None and callback(step, {
-                        "loss": loss, "position_rms": pos_rms, "normal_deg": nrm_deg,
-                        "lr": lr_now, "seconds": elapsed, "net": net}):
-                    stopped = "callback"
-                    break
-            if auto_steps:          # the bar counts seconds of the budget
-                bar.total = max(int(o["time_budget"]), 1)
-                bar.update(min(int(elapsed), bar.total), step=step, loss=f"{loss:.2e}",
-                           pos=f"{pos_rms:.1e}", nrm=f"{nrm_deg:.2f}deg")
             else:
-                bar.update(step, loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}",
-                           nrm=f"{nrm_deg:.2f}deg")
-            if checkpoint is not None and step % checkpoint_every == 0:
+                net = net.astype(t_dtype)
+            start, history, elapsed0 = 0, {k: [] for k in ("step", "loss", "position_rms",
+                                                          "normal_deg", "lr", "seconds")}, 0.0
+        opt = make_optimizer(o["optimizer"], _schedule(o))
+        if state is not None:
+            opt.load_state_dict(state["opt"])
+
+        # with no step count the schedule runs on the clock: its decay ends with the budget
+        auto_steps = o["steps"] is None
+        total = o["steps"] if not auto_steps else _MAX_AUTO_STEPS
+        if auto_steps and o["schedule"] == "cosine":
+            opt.schedule = _ClockCosine(opt.schedule, lambda: time.perf_counter() - t0,
+                                        o["time_budget"])
+        bar = Progress(total if not auto_steps else 1, "fit", enabled=progress)
+        t0 = time.perf_counter() - elapsed0
+        w = o["normal_weight"]
+        tw = o["tangent_weight"]
+        order = 1 if w else 0
+        ema_pos = ema_nrm = None
+        stopped = "step budget"
+        step = start
+        last_loss = float("nan")
+        saves = _CheckpointCadence(checkpoint, checkpoint_every, checkpoint_seconds,
+                                   held=start if state is not None else None)
+        rng_at_step = rng.bit_generator.state         # the generator as the step began
+
+        def write_checkpoint(rng_state=None):
+            if checkpoint is not None:
+                _save_checkpoint(checkpoint, net, opt, rng_state or rng.bit_generator.state,
+                                 step, history, time.perf_counter() - t0, key, target, metadata)
+                saves.saved(step)
+
+        updating = False        # True while a step's parameters and moments are half-updated
+        signals = deferred_signals()
+        try:
+            with signals:
+                while step < total:
+                    rng_at_step = rng.bit_generator.state
+                    p, q, nt = target.sample(o["batch"], rng)
+                    R = tangent_frame(p) if order else None
+                    pc = p.astype(t_dtype)
+                    qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
+                    parts = {"position": 0.0, "normal": 0.0}
+
+                    def loss_fn(y, JD, sl):
+                        val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p),
+                                                                w, tangent_weight=tw)
+                        parts["position"] += pr["position"]
+                        parts["normal"] += pr["normal"]
+                        return val, dy, dJD
+
+                    loss, grad = net.value_and_grad(
+                        pc, loss_fn, order=order,
+                        directions=None if R is None else R.astype(t_dtype))
+                    if not np.isfinite(loss) or not np.all(np.isfinite(grad)):
+                        stopped = "diverged"
+                        # the parameters are still those of the last good step: save them
+                        write_checkpoint(rng_at_step)
+                        raise DivergenceError(
+                            f"fit diverged at step {step} (loss {loss}); the parameters of "
+                            f"the last good step are kept"
+                            + (f" in the checkpoint {str(checkpoint)!r}" if checkpoint
+                               else "") + "; a smaller lr may avoid it")
+                    lr_now = opt.lr()
+                    updating = True
+                    opt.step(net.theta, grad)
+                    step += 1
+                    if o["readout_every"] and step % o["readout_every"] == 0:
+                        if o["readout"] == "gn":
+                            _gauss_newton_readout(net, target, rng, w, tw)
+                        else:
+                            _ridge_readout(net, target, rng)
+                    updating = False
+                    last_loss = loss
+                    pos_ms = parts["position"] / len(p)
+                    nrm_ms = parts["normal"] / len(p)
+                    ema_pos = pos_ms if ema_pos is None else 0.95 * ema_pos + 0.05 * pos_ms
+                    ema_nrm = nrm_ms if ema_nrm is None else 0.95 * ema_nrm + 0.05 * nrm_ms
+                    pos_rms = float(np.sqrt(ema_pos))
+                    # |n - n_t|^2 = 2 - 2 cos(angle)  ->  angle = 2 asin(|n - n_t| / 2)
+                    nrm_deg = float(np.degrees(2 * np.arcsin(min(1.0, np.sqrt(ema_nrm) / 2))))
+                    elapsed = time.perf_counter() - t0
+                    if step % history_every == 0 or step == total:
+                        for k, v in (("step", step), ("loss", loss), ("position_rms", pos_rms),
+                                     ("normal_deg", nrm_deg), ("lr", lr_now),
+                                     ("seconds", elapsed)):
+                            history[k].append(float(v))
+                        if callback is not None and callback(step, {
+                                "loss": loss, "position_rms": pos_rms, "normal_deg": nrm_deg,
+                                "lr": lr_now, "seconds": elapsed, "net": net}):
+                            stopped = "callback"
+                            break
+                    if auto_steps:          # the bar counts seconds of the budget
+                        bar.total = max(int(o["time_budget"]), 1)
+                        bar.update(min(int(elapsed), bar.total), step=step,
+                                   loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}",
+                                   nrm=f"{nrm_deg:.2f}deg")
+                    else:
+                        bar.update(step, loss=f"{loss:.2e}", pos=f"{pos_rms:.1e}",
+                                   nrm=f"{nrm_deg:.2f}deg")
+                    if signals.received is not None:       # between two steps: stop here
+                        write_checkpoint()
+                        raise FitInterrupted(step, checkpoint, signals.received)
+                    if saves.due(step):
+                        write_checkpoint()
+                    if o["tol"] is not None and step >= 20 and pos_rms < o["tol"]:
+                        stopped = "tolerance"
+                        break
+                    if o["time_budget"] is not None and elapsed >= o["time_budget"]:
+                        stopped = "time budget"
+                        break
+                bar.close(step if not auto_steps else bar.total, loss=f"{last_loss:.2e}")
+                seconds = time.perf_counter() - t0
                 write_checkpoint()
-            if o["tol"] is not None and step >= 20 and pos_rms < o["tol"]:
-                stopped = "tolerance"
-                break
-            if o["time_budget"] is not None and elapsed >= o["time_budget"]:
-                stopped = "time budget"
-                break
-    except KeyboardInterrupt:
-        write_checkpoint()
-        bar.close()
-        raise
-    except DivergenceError:
-        bar.close()
-        raise
-    bar.close(step if not auto_steps else bar.total, loss=f"{last_loss:.2e}")
-    seconds = time.perf_counter() - t0
-    write_checkpoint()
+        except FitInterrupted:
+            bar.close()
+            raise
+        except KeyboardInterrupt:
+            # a second signal, or an interrupt raised by the callback: the state is whole
+            # unless it landed inside an update, which is never saved
+            if not updating:
+                write_checkpoint()
+            bar.close()
+            held = step if not updating else saves.step
+            raise FitInterrupted(start if held is None else held,
+                                 checkpoint if held is not None else None,
+                                 signals.received or "SIGINT") from None
+        except DivergenceError:
+            bar.close()
+            raise
 
     surface = SphericalNeuralSurface(net.astype(np.float64), center=target.center,
                                      scale=target.scale, metadata=dict(metadata or {}))
@@ -539,6 +593,25 @@ AUTO = {
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
 _MAX_AUTO_STEPS = 1_000_000
+
+
+class _CheckpointCadence:
+    """When a fit writes its checkpoint: every ``every`` steps or ``seconds`` seconds since the
+    last write, whichever comes first; ``step`` is the step the file holds (None: no file)."""
+
+    def __init__(self, path, every, seconds, held=None):
+        self.path, self.every, self.seconds = path, every, seconds
+        self.step = held
+        self._last = time.monotonic()
+
+    def due(self, step):
+        if self.path is None:
+            return False
+        return (self.every is not None and step % self.every == 0) or (
+            self.seconds is not None and time.monotonic() - self._last >= self.seconds)
+
+    def saved(self, step):
+        self.step, self._last = step, time.monotonic()
 
 
 class _ClockCosine:
@@ -639,8 +712,8 @@ def _plan(target, o, given, net, elapsed=0.0):
 # ------------------------------------------------------------------------------ internals
 
 #: the keyword arguments of fit_sampler that fit_mesh and fit_shape pass through
-_PASSED = ("net", "checkpoint", "checkpoint_every", "resume", "progress", "callback",
-           "history_every", "source")
+_PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resume", "progress",
+           "callback", "history_every", "source")
 
 
 def _check_early(options):
@@ -653,6 +726,8 @@ def _check_early(options):
     o = dict(DEFAULTS)
     o.update({k: v for k, v in options.items() if k in DEFAULTS and v is not None})
     _check_options(o)
+    _check_checkpoint_options(options.get("checkpoint"), options.get("checkpoint_every", 500),
+                              options.get("checkpoint_seconds", 60.0))
     if o["steps"] is not None and o["time_budget"] is not None and options.get("net") is None:
         per_step = _probe_step_time(o)
         if o["steps"] * per_step > 2.0 * o["time_budget"]:
@@ -661,6 +736,21 @@ def _check_early(options):
                 f"a step of this network takes about {per_step * 1e3:.0f} ms here, so "
                 f"{o['steps']} steps need about {o['steps'] * per_step:.0f} s; pass only one "
                 f"of them (time_budget alone sizes the step count to fit)")
+
+
+def _check_checkpoint_options(path, every, seconds):
+    """The checkpoint's file name, folder and cadence, checked before any work."""
+    if path is not None:
+        path = Path(path)
+        if path.suffix.lower() != ".npz":
+            raise ValueError(f"checkpoint {path.name!r} must end in .npz")
+        folder = path.parent if str(path.parent) else Path(".")
+        if not folder.is_dir():
+            raise ValueError(f"checkpoint folder {str(folder)!r} does not exist")
+    if every is not None:
+        check_positive_int(every, "checkpoint_every")
+    if seconds is not None:
+        check_positive_float(seconds, "checkpoint_seconds")
 
 
 def _probe_step_time(o, repeats=2):
@@ -839,7 +929,7 @@ def _resume_key(target, o, net):
     return json.dumps(keep, sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, metadata):
+def _save_checkpoint(path, net, opt, rng_state, step, history, seconds, key, target, metadata):
     surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
                                      metadata=dict(metadata or {}))
     arrays = surface.state()
@@ -847,7 +937,7 @@ def _save_checkpoint(path, net, opt, rng, step, history, seconds, key, target, m
     arrays.update({
         "checkpoint.step": np.array(step), "checkpoint.seconds": np.array(seconds),
         "checkpoint.key": np.array(key),
-        "checkpoint.rng": np.array(json.dumps(rng.bit_generator.state)),
+        "checkpoint.rng": np.array(json.dumps(rng_state)),
     })
     arrays.update({f"checkpoint.history.{k}": np.asarray(v) for k, v in history.items()})
     save_npz(path, arrays)
