@@ -216,3 +216,24 @@ def test_cli_sigterm_then_resume_then_kill_9(mesh, tmp_path):
     assert "removed" in err and "m.npz.0badc0de.tmp" in err
     assert _step_of(ck) > killed_at
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.ckpt.npz"]
+
+
+def test_a_fit_in_a_worker_thread_leaves_signals_alone(tmp_path):
+    """Handlers can only be set from the main thread: a fit in another thread (a Dask worker,
+    for instance) runs with the signals as they are, and still checkpoints."""
+    import threading
+    result = {}
+
+    def work():
+        try:
+            result["report"] = fit_shape(E, steps=5, checkpoint=tmp_path / "ck.npz", **TINY)[1]
+        except BaseException as exc:                 # pragma: no cover - reported below
+            result["error"] = exc
+
+    before = signal.getsignal(signal.SIGTERM)
+    thread = threading.Thread(target=work)
+    thread.start()
+    thread.join()
+    assert "error" not in result, result.get("error")
+    assert result["report"].steps == 5 and _step_of(tmp_path / "ck.npz") == 5
+    assert signal.getsignal(signal.SIGTERM) is before
