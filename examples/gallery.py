@@ -9,24 +9,25 @@ below are only the icosphere pushed through the surface map, for drawing):
                                    fitted spot: Rayleigh-Ritz (the library's default) and the
                                    paper's neural method, each panel titled with its eigenvalue
   gallery_heat_flow.png            heat flow of a hot spot on the fitted spot (spectral scheme)
-  gallery_mcf.png                  mean curvature flow of a wobbly ellipsoid (spot's thin legs
-                                   and ears would pinch off), coloured by H
+  gallery_mcf.png                  mean curvature flow of a wobbly ellipsoid, coloured by H
+                                   (spot's thin legs, ears and horns are expected to pinch off)
 
-Run (from anywhere; paths are relative to the project):
+Run (from any folder; the default output folder is the project's docs/images):
 
-    python examples/gallery.py                       # fits spot: about 13 minutes on 2 cores
-    python examples/gallery.py --model spot.npz      # reuse a fitted spot: about 4 minutes
+    python examples/gallery.py                       # fits spot: 15-19 minutes on 2 cores
+    python examples/gallery.py --model spot.npz      # reuse a fitted spot: 5-10 minutes
     python examples/gallery.py --save-model spot.npz # keep the fit for the next run
     python examples/gallery.py --quick --out /tmp/g  # a smoke run on an ellipsoid: seconds
 
 The full run fits ``../shared/data/meshes/spot_triangulated.obj`` with
 ``SphericalNeuralSurface.fit`` (its time budget: 540 s for a detailed mesh such as spot), then
-spends about 3 minutes on the eigenmodes (most of it the neural ones), heat flow, mean
-curvature flow and rendering. Every random choice is seeded (``--seed``); the fit is
-time-budgeted, so its step count, and with it the pictures' fine detail, depends on the
-machine's speed. Nothing is written outside ``--out`` (default docs/images) unless
-``--save-model`` asks for it; each PNG is written atomically (a temporary file renamed into
-place).
+spends 5-10 minutes on the eigenmodes (most of it the neural ones), heat flow, mean curvature
+flow and rendering: 18 min 40 s in all on the project's busy 2-core machine (load about 10),
+5 min for the figures from a saved model on a quieter one. Every random choice is seeded
+(``--seed``); the fit is time-budgeted, so its step count, and with it the pictures' fine
+detail, depends on the machine's speed. Nothing is written outside ``--out`` (default
+docs/images) unless ``--save-model`` asks for it; each PNG is written atomically (a temporary
+file renamed into place).
 
 Needs matplotlib, the ``plots`` extra: ``pip install 'sns-np[plots]'``.
 """
