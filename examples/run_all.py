@@ -6,7 +6,7 @@ gallery.py then runs in its quick mode (a small ellipsoid fit, seconds; the full
 docs/gallery.md fits spot for about 9 minutes and is run by hand). Each runs in its own Python
 process, as a user would run it.
 
-    SNS_NP_SMOKE=1 python examples/run_all.py     # tiny budgets: well under a minute
+    SNS_NP_SMOKE=1 python examples/run_all.py     # tiny budgets: under a minute
     python examples/run_all.py --out-dir out      # full budgets (minutes), keep the outputs
 
 ``tox -e examples`` runs the first line. Without --out-dir the outputs go to a temporary
