@@ -17,6 +17,10 @@ SMOKE_FIT = {"width": 32, "depth": 2, "steps": 50, "batch": 512, "n_eval": 2000}
 
 DEFAULT_OUT_DIR = "sns_np_examples_out"
 
+#: the shared third-party test meshes, beside the project (``../shared/data/meshes``); they
+#: are never copied into it, so a fresh clone does not have them
+MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
+
 #: the default input: an ellipsoid meshed from a level-4 icosphere (2,562 vertices), generated
 #: by the package itself, so the examples need no download
 BUILTIN = "builtin:ellipsoid(1, 1.3, 0.7):level4"
@@ -35,6 +39,16 @@ def read_mesh(path=None):
     from sns_np.mesh import load
     V, F = load(path)
     return V, F, Path(path).stem
+
+
+def shared_mesh(name) -> Path:
+    """The path of one of the shared meshes (e.g. ``spot_triangulated.obj``); a clear
+    FileNotFoundError when it is absent."""
+    path = MESH_DIR / name
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: the shared meshes live beside the project "
+                                f"in ../shared/data/meshes; pass a mesh or a model explicitly")
+    return path
 
 
 def output_dir(path) -> Path:

@@ -2,9 +2,11 @@
 
 The examples form a small pipeline on the built-in ellipsoid: fit_mesh.py fits and saves a
 model, curvature_map.py renders its curvature, compare_to_mesh.py compares it with the mesh.
-Each runs in its own Python process, as a user would run it.
+gallery.py then runs in its quick mode (a small ellipsoid fit, seconds; the full gallery of
+docs/gallery.md fits spot for about 9 minutes and is run by hand). Each runs in its own Python
+process, as a user would run it.
 
-    SNS_NP_SMOKE=1 python examples/run_all.py     # tiny budgets: well under a minute
+    SNS_NP_SMOKE=1 python examples/run_all.py     # tiny budgets: under a minute
     python examples/run_all.py --out-dir out      # full budgets (minutes), keep the outputs
 
 ``tox -e examples`` runs the first line. Without --out-dir the outputs go to a temporary
@@ -26,6 +28,8 @@ EXAMPLES = [
     ("fit_mesh.py", [], ["ellipsoid.npz"]),
     ("curvature_map.py", [], ["ellipsoid_curvature.png"]),
     ("compare_to_mesh.py", [], ["ellipsoid_compare.json"]),
+    ("gallery.py", ["--quick"], ["gallery_spot_mean_curvature.png", "gallery_eigenmodes.png",
+                                 "gallery_heat_flow.png", "gallery_mcf.png"]),
 ]
 
 
