@@ -115,10 +115,10 @@ def connect(scheduler=None, *, workers=None):
         return
     distributed = _require()
     n, threads = local_layout(workers)
-    dashboard = ":0" if importlib.util.find_spec("bokeh") is not None else None
+    # the dashboard on a free port (":8787" may be taken by another cluster on the machine)
     cluster = distributed.LocalCluster(
         n_workers=n, threads_per_worker=threads, processes=True, host="127.0.0.1",
-        dashboard_address=dashboard, silence_logs=logging.ERROR)
+        dashboard_address=":0", silence_logs=logging.ERROR)
     try:
         client = distributed.Client(cluster)
         try:
@@ -130,7 +130,9 @@ def connect(scheduler=None, *, workers=None):
 
 
 def dashboard_address(client):
-    """The client's dashboard URL, or None when the scheduler runs none (bokeh not installed).
+    """The client's dashboard URL, or None when the scheduler runs none.
+
+    Without bokeh here the URL carries a note: the scheduler's status pages need it.
 
     Examples
     --------
@@ -146,7 +148,10 @@ def dashboard_address(client):
         return None
     if "dashboard" not in services:
         return None
-    return client.dashboard_link
+    link = client.dashboard_link
+    if importlib.util.find_spec("bokeh") is None:
+        link += " (its status pages need bokeh >= 3.1: pip install bokeh)"
+    return link
 
 
 # ------------------------------------------------------------------------------ thread limits

@@ -334,4 +334,5 @@ def _announce(client, n_tasks, n_skipped, what="fit"):
         f"threads) at {d.get('scheduler')}" + (f"; {n_skipped} complete already, skipped"
                                                if n_skipped else ""))
     link = d.get("dashboard")
-    say(f"dashboard: {link}" if link else "dashboard: none (install bokeh >= 3.1 for one)")
+    if link:
+        say(f"dashboard: {link}")
