@@ -241,8 +241,10 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     threads = int(threads_per_fit)
     if threads < 1:
         raise ValueError(f"threads_per_fit must be >= 1, got {threads_per_fit}")
-    out_dir = _make_folder(out_dir, "output")
-    ck_dir = out_dir if checkpoint_dir is None else _make_folder(checkpoint_dir, "checkpoint")
+    # folders are checked now and created once the cluster is reached (a batch that cannot
+    # start leaves nothing behind)
+    out_dir = _check_folder(out_dir, "output")
+    ck_dir = out_dir if checkpoint_dir is None else _check_folder(checkpoint_dir, "checkpoint")
     fit_options = {k: v for k, v in fit_options.items() if v is not None}
     fit_options["checkpoint_seconds"] = checkpoint_seconds
     recipe = _recipe(fit_options, threads)
@@ -267,6 +269,8 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     cluster = {}
     if tasks:
         with _client(client, scheduler, workers) as c:
+            out_dir.mkdir(exist_ok=True)
+            ck_dir.mkdir(exist_ok=True)
             cluster = _describe(c)
             if progress:
                 _announce(c, len(tasks), len(meshes) - len(tasks))
@@ -284,23 +288,23 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
         "seconds": time.perf_counter() - t0, "cluster": cluster,
         "counts": {s: sum(r["status"] == s for r in rows) for s in ("done", "skipped", "error")},
     })
+    out_dir.mkdir(exist_ok=True)
     table.to_csv(out_dir / "summary.csv")
     table.to_json(out_dir / "summary.json")
     return table
 
 
-def _make_folder(path, what):
+def _check_folder(path, what):
+    """A folder that exists and is writable, or whose parent does (it is made later)."""
     path = Path(path)
     parent = path.parent if str(path.parent) else Path(".")
     if path.exists() and not path.is_dir():
         raise ValueError(f"{what} folder {str(path)!r} exists and is not a folder")
-    if not path.exists():
-        if not parent.is_dir():
-            raise ValueError(f"parent folder {str(parent)!r} of the {what} folder does not "
-                             f"exist")
-        path.mkdir(exist_ok=True)
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise ValueError(f"{what} folder {str(path)!r} is not writable")
+    if not path.exists() and not parent.is_dir():
+        raise ValueError(f"parent folder {str(parent)!r} of the {what} folder does not exist")
+    here = path if path.exists() else parent
+    if not os.access(here, os.W_OK | os.X_OK):
+        raise ValueError(f"{what} folder {str(here)!r} is not writable")
     return path
 
 
