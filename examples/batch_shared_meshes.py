@@ -125,6 +125,8 @@ def main(argv=None):
     parser.add_argument("--steps", type=positive_int, help="steps per fit (default: auto)")
     parser.add_argument("--width", type=positive_int, help="network width (default 256)")
     parser.add_argument("--depth", type=positive_int, help="residual blocks (default 8)")
+    parser.add_argument("--max-degree", type=positive_int, default=40,
+                        help="largest harmonic degree of the Rayleigh-Ritz spectra (40)")
     parser.add_argument("--workers", type=positive_int, help="local worker processes")
     parser.add_argument("--scheduler", help="address of a running Dask scheduler")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -149,7 +151,7 @@ def main(argv=None):
                            "normal_mean_deg", "message"]))
         models = [r["output"] for r in fits if r["status"] != "error"]
         neural = spectra_many(models, k, out=out / "spectra_neural.csv",
-                              progress=not args.quiet, **cluster)
+                              progress=not args.quiet, L_max=args.max_degree, **cluster)
         fem = fem_table(paths, k)
         fem.to_csv(out / "spectra_fem.csv")
         fem.to_json(out / "spectra_fem.json")
