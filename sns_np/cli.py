@@ -217,7 +217,67 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lr", type=_positive_float, help="refit learning rate (1e-4)")
     _add_flow_options(p, "sample points per step")
     p.set_defaults(func=_cmd_mcf)
+
+    p = sub.add_parser("batch", help="fit many meshes, or their spectra, on a Dask cluster",
+                       description="Collections of shapes on dask.distributed: a local "
+                       "cluster of processes sized to the machine, or a running scheduler "
+                       "(--scheduler). Needs the extra: pip install \"sns-np[distributed]\" "
+                       "(docs/batch.md).")
+    bsub = p.add_subparsers(dest="batch_command", metavar="BATCH_COMMAND", required=True)
+    b = bsub.add_parser("fit", help="fit every mesh: DIR/NAME.npz and DIR/summary.csv, .json",
+                        description="Fit a neural surface to every mesh, one Dask task per "
+                        "mesh, and write DIR/NAME.npz per mesh with DIR/summary.csv and "
+                        "DIR/summary.json (one row per mesh: status, time, fit figures, "
+                        "output). A bad mesh fails its own row. Each fit checkpoints to "
+                        "NAME.ckpt.npz and a rescheduled task resumes from it; rerunning the "
+                        "command skips complete outputs. Exit status 1 when a row failed.")
+    b.add_argument("meshes", nargs="+", metavar="MESH",
+                   help="input meshes (.obj, .off, .ply, .stl); their names must differ")
+    b.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder")
+    _add_cluster_options(b)
+    b.add_argument("--checkpoint", metavar="FOLDER",
+                   help="folder of the checkpoints NAME.ckpt.npz (default: DIR)")
+    b.add_argument("--resume", action="store_true",
+                   help="accepted for symmetry with 'sns-np fit': a batch always resumes "
+                        "from the checkpoints it finds")
+    b.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
+                   help="write each fit's checkpoint at least this often (default: %(default)g"
+                        " s): a killed worker loses at most that much of its fit")
+    b.add_argument("--keep-checkpoint", action="store_true",
+                   help="keep the checkpoints after the models are saved")
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    _add_fit_options(b)
+    b.set_defaults(func=_cmd_batch_fit, command="batch fit")
+    b = bsub.add_parser("spectrum", help="first k Laplace-Beltrami eigenvalues of every model",
+                        description="Compute the first K non-zero Laplace-Beltrami eigenvalues "
+                        "of every model by Rayleigh-Ritz (as 'sns-np eigen'), one Dask task "
+                        "per model, and write them as a table (CSV, and JSON beside it). "
+                        "Exit status 1 when a row failed.")
+    b.add_argument("models", nargs="+", metavar="MODEL", help="fitted models (.npz)")
+    b.add_argument("-k", type=_positive_int, required=True, help="eigenvalues per model")
+    b.add_argument("-o", "--output", required=True, metavar="TABLE.csv",
+                   help="output table (.csv; the .json goes beside it)")
+    b.add_argument("--max-degree", type=_positive_int, default=40, metavar="L_MAX",
+                   help="largest harmonic degree tried (default: %(default)s)")
+    b.add_argument("--tol", type=_positive_float, default=1e-6,
+                   help="relative change of the eigenvalues at which the degree stops rising "
+                        "(default: %(default)s)")
+    _add_cluster_options(b)
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
+    b.set_defaults(func=_cmd_batch_spectrum, command="batch spectrum")
     return parser
+
+
+def _add_cluster_options(p):
+    g = p.add_argument_group("cluster (default: a local cluster of processes, one per core)")
+    g.add_argument("--scheduler", metavar="ADDRESS",
+                   help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    g.add_argument("--workers", type=_positive_int, metavar="N",
+                   help="worker processes of the local cluster (default: one per core; "
+                        "processes x threads = cores)")
+    g.add_argument("--threads-per-fit", type=_positive_int, default=1, metavar="N",
+                   help="BLAS and Numba threads of each task (default: %(default)s); models "
+                        "are bit-identical across workers at a fixed value")
 
 
 # ------------------------------------------------------------------------------ commands
@@ -298,6 +358,48 @@ def _cmd_fit(args):
         print(line)
     print(report.summary())
     print(f"wrote {out}" + (f" (checkpoint kept: {ckpt})" if args.keep_checkpoint else ""))
+    return 0
+
+
+def _cmd_batch_fit(args):
+    from .batch import fit_many
+    if args.scheduler and args.workers:
+        raise ValueError("--workers applies to a local cluster; a running scheduler "
+                         "(--scheduler) has its own workers")
+    table = fit_many(args.meshes, args.output, scheduler=args.scheduler, workers=args.workers,
+                     threads_per_fit=args.threads_per_fit, checkpoint_dir=args.checkpoint,
+                     checkpoint_seconds=args.checkpoint_every,
+                     keep_checkpoint=args.keep_checkpoint, progress=not args.quiet,
+                     **_fit_kwargs(args))
+    print(_printable(table.format(["name", "status", "steps", "position_relative",
+                                   "normal_mean_deg", "seconds", "message"])))
+    out = Path(args.output)
+    return _batch_status(table, f"{out / 'summary.csv'} and {out / 'summary.json'}")
+
+
+def _cmd_batch_spectrum(args):
+    from .batch import spectra_many
+    if args.scheduler and args.workers:
+        raise ValueError("--workers applies to a local cluster; a running scheduler "
+                         "(--scheduler) has its own workers")
+    table = spectra_many(args.models, args.k, scheduler=args.scheduler, workers=args.workers,
+                         out=args.output, threads_per_fit=args.threads_per_fit,
+                         progress=False if args.quiet else True, L_max=args.max_degree,
+                         tol=args.tol)
+    shown = ["name", "status", "L"] + [f"lambda_{i}" for i in range(1, min(args.k, 5) + 1)]
+    print(_printable(table.format(shown + ["message"])))
+    out = Path(args.output)
+    return _batch_status(table, f"{out} and {out.with_suffix('.json')}")
+
+
+def _batch_status(table, written):
+    """Exit status of a batch: 0 when every row is done or skipped, 1 when a row failed."""
+    failed = [r["name"] for r in table if r["status"] == "error"]
+    print(f"wrote {written}")
+    if failed:
+        print(f"sns-np batch: {len(failed)} of {len(table)} failed ({', '.join(failed[:5])}"
+              f"{', ...' if len(failed) > 5 else ''}); their rows say why", file=sys.stderr)
+        return 1
     return 0
 
 

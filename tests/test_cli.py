@@ -19,7 +19,7 @@ from sns_np.surface import SphericalNeuralSurface
 
 from .conftest import run_cli
 
-COMMANDS = ["demo", "embed", "fit", "eval", "info", "eigen"]
+COMMANDS = ["demo", "embed", "fit", "eval", "info", "eigen", "batch"]
 TINY_FIT = ["--steps", "5", "--width", "16", "--depth", "1", "--quiet"]
 
 
@@ -283,6 +283,16 @@ BAD = {
     "demo output": ("demo -o {o}/m.txt", "must end in"),
     "missing arguments": ("fit {d}/ellipsoid.obj", "-o/--output"),
     "unknown command": ("fitt {d}/ellipsoid.obj", "invalid choice"),
+    "batch, no output parent": ("batch fit {d}/ellipsoid.obj -o {o}/no/out", "does not exist"),
+    "batch, name clash": ("batch fit {d}/ellipsoid.obj {d}/sub/ellipsoid.obj -o {o}/out",
+                          "same output ellipsoid.npz"),
+    "batch, workers and scheduler": ("batch fit {d}/ellipsoid.obj -o {o}/out --workers 2 "
+                                     "--scheduler tcp://127.0.0.1:1", "--workers applies"),
+    "batch, zero steps": ("batch fit {d}/ellipsoid.obj -o {o}/out --steps 0", "--steps"),
+    "batch spectrum, output": ("batch spectrum {d}/model.npz -k 3 -o {o}/t.txt",
+                               "must end in .csv"),
+    "batch spectrum, no k": ("batch spectrum {d}/model.npz -o {o}/t.csv", "-k"),
+    "batch, no subcommand": ("batch", "BATCH_COMMAND"),
 }
 
 

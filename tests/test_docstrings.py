@@ -28,13 +28,13 @@ import sns_np
 
 #: the public modules (a subpackage's __all__ re-exports its modules' public names)
 PUBLIC_MODULES = ["nn", "geometry", "shapes", "mesh", "sampling", "fields", "spectral", "flows",
-                  "surface", "testing", "protocol", "errors", "quadrature", "demo"]
+                  "surface", "testing", "protocol", "errors", "quadrature", "demo", "batch"]
 
 #: public definitions allowed to lack an Examples section (none)
 PENDING = set()
 
 #: optional dependencies an example may need; without them that example is skipped
-OPTIONAL = ("meshio", "trimesh", "igl", "matplotlib")
+OPTIONAL = ("meshio", "trimesh", "igl", "matplotlib", "distributed", "threadpoolctl")
 
 FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
 
