@@ -91,7 +91,9 @@ class HeatFlowResult:
     steps : int, explicit steps taken (0 for "spectral")
     seconds : float
     stopped : str, "t_end" or the divergence message
-    info : dict, scheme details (sample size, initial fit error, projection residual, ...)
+    info : dict, scheme details: for "network" the time ``scheme`` and the number of
+        ``refits`` (one per step for Euler, two for the second-order schemes), sample size,
+        initial fit error, ...; for "spectral" the projection residual, ...
 
     Examples
     --------
