@@ -6,8 +6,10 @@ heat_flow               ``f_t = Delta_S f``: an explicit network scheme (``schem
 mean_curvature_flow     ``X_t = Delta_S X = -2 H n`` by explicit steps (``scheme="heun"`` by
                         default, ``"midpoint"``, or the paper's ``"euler"``) and refits of the
                         surface network; a :class:`MeanCurvatureFlowResult`
-stability_limit         ``A / (2 pi N)``, the largest stable step of every scheme
-amplification           ``R(z)``, the factor one step applies to a heat eigenmode
+stability_limit         ``A / (2 pi N)``, the largest stable step
+                        (the same for every scheme)
+amplification           ``R(z)``, the factor by which one step of a scheme
+                        multiplies a heat eigenmode
 fit_sdf                 a SphericalNeuralSurface on the zero set of a signed distance function
                         (also ``SphericalNeuralSurface.fit_sdf``); an :class:`SDFFitReport`
 
