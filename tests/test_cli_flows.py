@@ -93,6 +93,41 @@ def test_bad_input_exits_2(model, tmp_path, capsys, argv, message):
     assert (full / "keep.txt").read_text() == "x"
 
 
+@pytest.mark.parametrize("scheme, refits", [("euler", 4), ("heun", 8), ("midpoint", 8)])
+def test_mcf_scheme_flag(model, tmp_path, capsys, scheme, refits):
+    out = tmp_path / "mcf"
+    rc = main(["mcf", str(model), "--t-end", "0.01", "--dt", "0.0025", "--snapshots", "1",
+               "--points", "300", "--refit-steps", "1", "--level", "1", "--scheme", scheme,
+               "-o", str(out), "--quiet"])
+    assert rc == 0
+    info = json.loads((out / "flow.json").read_text())
+    assert info["scheme"] == scheme and info["refits"] == refits and info["steps"] == 4
+    assert f"({refits} refits, scheme {scheme})" in capsys.readouterr().out
+
+
+def test_heat_scheme_flag(model, tmp_path, capsys):
+    out = tmp_path / "heat"
+    rc = main(["heat", str(model), "--field", "sh:1,0", "--t-end", "0.02", "--dt", "0.01",
+               "--snapshots", "1", "--points", "200", "--refit-steps", "2", "--level", "1",
+               "--scheme", "euler", "-o", str(out), "--quiet"])
+    assert rc == 0
+    info = json.loads((out / "flow.json").read_text())["info"]
+    assert info["scheme"] == "euler" and info["refits"] == 2
+    assert "(2 refits, scheme euler)" in capsys.readouterr().out
+
+
+def test_scheme_flag_default_and_choices(capsys):
+    from sns_np.cli import build_parser
+    for cmd in ("mcf", "heat"):
+        sub = build_parser()._subparsers._group_actions[0].choices[cmd]
+        action = next(a for a in sub._actions if "--scheme" in a.option_strings)
+        assert action.default == "heun" and list(action.choices) == ["heun", "midpoint", "euler"]
+        assert "(default: heun)" in " ".join(sub.format_help().split())
+    with pytest.raises(SystemExit) as exc:
+        main(["mcf", "m.npz", "--t-end", "1", "--scheme", "rk4", "-o", "x"])
+    assert exc.value.code == 2 and "invalid choice: 'rk4'" in capsys.readouterr().err
+
+
 def test_mcf_divergence_keeps_last_good_snapshot(model, tmp_path, capsys):
     out = tmp_path / "mcf"
     rc = main(["mcf", str(model), "--t-end", "0.01", "--dt", "0.002", "--snapshots", "5",

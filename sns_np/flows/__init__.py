@@ -1,16 +1,22 @@
 """Heat flow, mean curvature flow and fitting to a signed distance function (paper Sec. 6).
 
-heat_flow               ``f_t = Delta_S f``: the paper's explicit network scheme or an exact
-                        spectral one; a :class:`HeatFlowResult`
-mean_curvature_flow     ``X_t = Delta_S X = -2 H n`` by explicit steps and refits of the surface
-                        network; a :class:`MeanCurvatureFlowResult`
+heat_flow               ``f_t = Delta_S f``: an explicit network scheme (``scheme="heun"``,
+                        second order, or the paper's ``"euler"``) or an exact spectral one;
+                        a :class:`HeatFlowResult`
+mean_curvature_flow     ``X_t = Delta_S X = -2 H n`` by explicit steps (``scheme="heun"`` by
+                        default, ``"midpoint"``, or the paper's ``"euler"``) and refits of the
+                        surface network; a :class:`MeanCurvatureFlowResult`
+stability_limit         ``A / (2 pi N)``, the largest stable step
+                        (the same for every scheme)
+amplification           ``R(z)``, the factor by which one step of a scheme
+                        multiplies a heat eigenmode
 fit_sdf                 a SphericalNeuralSurface on the zero set of a signed distance function
                         (also ``SphericalNeuralSurface.fit_sdf``); an :class:`SDFFitReport`
 
 The equations are mapped to the code, and the accuracy measured, in ``docs/flows.md``.
 """
 
-from ._common import StabilityWarning, stability_limit
+from ._common import SCHEMES, StabilityWarning, amplification, stability_limit
 from .heat import HEAT_DEFAULTS, HeatFlowResult, ModalField, heat_flow
 from .mcf import MCF_DEFAULTS, MeanCurvatureFlowResult, mean_curvature_flow
 from .sdf import SDFFitReport, fit_sdf, project_to_zero_set
@@ -18,4 +24,4 @@ from .sdf import SDFFitReport, fit_sdf, project_to_zero_set
 __all__ = ["heat_flow", "HeatFlowResult", "ModalField", "HEAT_DEFAULTS",
            "mean_curvature_flow", "MeanCurvatureFlowResult", "MCF_DEFAULTS",
            "fit_sdf", "SDFFitReport", "project_to_zero_set", "StabilityWarning",
-           "stability_limit"]
+           "stability_limit", "amplification", "SCHEMES"]

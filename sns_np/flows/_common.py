@@ -61,34 +61,98 @@ def step_points(n, rng):
     return fibonacci_sphere(n) @ random_rotation(rng).T
 
 
-def stability_limit(area, n_points):
-    """Largest stable explicit time step ``dt_max = h^2 / (2 pi)``, ``h^2 = A / N``.
+#: explicit time schemes of the network flows: name -> ``(a, b)`` of the two-stage
+#: Runge-Kutta step ``y* = y + a h F(y)``, ``y+ = y + h ((1 - b) F(y) + b F(y*))``
+#: (``None``: one stage, forward Euler, the paper's). ``a b = 1/2`` makes both second order.
+SCHEMES = {"heun": (1.0, 0.5), "midpoint": (0.5, 1.0), "euler": None}
+DEFAULT_SCHEME = "heun"
 
-    Forward Euler ``f + dt Delta f`` multiplies an eigenmode of eigenvalue ``lambda`` by
-    ``1 - dt lambda``, stable for ``dt <= 2 / lambda``. ``N`` sample values carry at most about
-    ``N`` modes, and by Weyl's law the ``N``-th eigenvalue of a surface of area ``A`` is
-    ``lambda_N ~ 4 pi N / A``. Hence ``dt <= 2 / lambda_N = A / (2 pi N) = h^2 / (2 pi)`` with
-    ``h = sqrt(A / N)`` the mean sample spacing (docs/flows.md).
+#: length of the real stability interval ``[-c, 0]`` of each scheme's amplification factor
+#: ``R(z)``, ``z = -dt lambda``: Euler ``R = 1 + z``; every two-stage second-order scheme
+#: ``R = 1 + z + z^2 / 2 = ((1 + z)^2 + 1) / 2``, which lies in ``[1/2, 1]`` exactly for
+#: ``z in [-2, 0]``. Both give ``c = 2``.
+STABILITY_INTERVAL = {"euler": 2.0, "heun": 2.0, "midpoint": 2.0}
+
+
+def check_scheme(scheme):
+    """``scheme`` if it names a time scheme, else a ValueError naming the allowed ones."""
+    if not isinstance(scheme, str) or scheme not in SCHEMES:
+        raise ValueError(f"unknown scheme {scheme!r}; expected one of {sorted(SCHEMES)} "
+                         f"(default {DEFAULT_SCHEME!r})")
+    return scheme
+
+
+def stages(scheme):
+    """Refits (network evaluations) per time step of ``scheme``: 1 for Euler, 2 otherwise."""
+    return 1 if SCHEMES[check_scheme(scheme)] is None else 2
+
+
+def amplification(z, scheme):
+    """The factor ``R(z)`` by which one step of ``scheme`` multiplies an eigenmode of the heat
+    equation, ``z = -dt lambda``: ``1 + z`` (Euler), ``1 + z + z^2 / 2`` (Heun, midpoint).
+
+    ``R(z)^n`` is what ``n`` exact steps make of ``exp(n z)``: the time error of a scheme, apart
+    from the refits' (docs/flows.md).
+
+    Parameters
+    ----------
+    z : float or array, ``-dt lambda``
+    scheme : {"euler", "heun", "midpoint"}
+
+    Returns
+    -------
+    float array shaped like ``z``
+
+    Examples
+    --------
+    >>> z = -0.1                                   # dt lambda = 0.1; exp(-0.1) = 0.904837
+    >>> float(amplification(z, "euler")), float(amplification(z, "heun"))
+    (0.9, 0.905)
+    """
+    z = np.asarray(z, dtype=np.float64)
+    return 1.0 + z if stages(scheme) == 1 else 1.0 + z + 0.5 * z * z
+
+
+def stability_limit(area, n_points, scheme="euler"):
+    """Largest stable explicit time step ``dt_max = c h^2 / (4 pi)``, ``h^2 = A / N``.
+
+    A step of ``scheme`` multiplies an eigenmode of eigenvalue ``lambda`` by ``R(-dt lambda)``
+    (:func:`amplification`), bounded by 1 for ``dt lambda <= c``, with ``c = 2`` for all three
+    schemes: Euler ``|1 + z| <= 1`` and Heun / midpoint ``|1 + z + z^2 / 2| <= 1`` both hold
+    exactly on ``z in [-2, 0]``. ``N`` sample values carry at most about ``N`` modes, and by
+    Weyl's law the ``N``-th eigenvalue of a surface of area ``A`` is
+    ``lambda_N ~ 4 pi N / A``. Hence ``dt <= 2 / lambda_N = A / (2 pi N) = h^2 / (2 pi)``
+    with ``h = sqrt(A / N)`` the mean sample spacing (docs/flows.md).
+
+    Parameters
+    ----------
+    area : float, surface area ``A``
+    n_points : int, sample points ``N``
+    scheme : {"euler", "heun", "midpoint"}, the time scheme (the limit is the same for all)
 
     Examples
     --------
     >>> round(stability_limit(4 * np.pi, 1000), 6)           # unit sphere, 1000 sample points
     0.002
+    >>> stability_limit(4 * np.pi, 1000, "heun") == stability_limit(4 * np.pi, 1000, "euler")
+    True
     """
-    return float(area) / (2.0 * math.pi * int(n_points))
+    c = STABILITY_INTERVAL[check_scheme(scheme)]
+    return c * float(area) / (4.0 * math.pi * int(n_points))
 
 
-def check_stability(dt, area, n_points, mode, what, during=""):
+def check_stability(dt, area, n_points, mode, what, during="", scheme="euler"):
     """Warn (``mode="warn"``), refuse (``"raise"``) or pass (``"ignore"``) when ``dt`` exceeds
-    :func:`stability_limit`; returns the limit."""
+    :func:`stability_limit` of ``scheme``; returns the limit."""
     check_choice(mode, "stability", STABILITY_MODES)
-    limit = stability_limit(area, n_points)
+    limit = stability_limit(area, n_points, scheme)
     if dt > limit and mode != "ignore":
+        c = STABILITY_INTERVAL[scheme]
         msg = (f"{what}: time step dt = {dt:.4g} exceeds the explicit stability limit "
-               f"dt <= h^2 / (2 pi) = A / (2 pi N) = {limit:.4g}{during} (area A = {area:.4g}, "
-               f"N = {n_points} sample points, spacing h = {math.sqrt(area / n_points):.3g}); "
-               f"modes with eigenvalue above 2 / dt = {2 / dt:.4g} can grow. Use a smaller dt "
-               f"or fewer points")
+               f"dt <= h^2 / (2 pi) = A / (2 pi N) = {limit:.4g}{during} (scheme {scheme!r}, "
+               f"stable for dt lambda <= {c:g}; area A = {area:.4g}, N = {n_points} sample "
+               f"points, spacing h = {math.sqrt(area / n_points):.3g}); modes with eigenvalue "
+               f"above {c:g} / dt = {c / dt:.4g} can grow. Use a smaller dt or fewer points")
         if mode == "raise":
             raise ValueError(msg)
         warnings.warn(msg, StabilityWarning, stacklevel=3)

@@ -4,17 +4,23 @@ Two schemes, both returning a :class:`HeatFlowResult` (``times`` ascending from 
 matching ``fields``, each a field on the parameter sphere, ``h(S(p)) = g(p)``):
 
 ``method="network"`` (the paper's)
-    The field is a small :class:`~sns_np.fields.NeuralField`. Every step evaluates
-    ``f + dt Delta_S f`` at fixed sample points (``Delta_S`` by the divergence of the gradient,
-    paper Eq. 13, with the surface's chart jets computed once) and refits the network from its
-    previous weights: ``refit_steps`` Adam steps on the area-weighted squared error, then an
-    exact least-squares solve of the read-out layer (in which the field is linear).
+    The field is a small :class:`~sns_np.fields.NeuralField`. A refit evaluates a target such
+    as ``f + dt Delta_S f`` at fixed sample points (``Delta_S`` by the divergence of the
+    gradient, paper Eq. 13, with the surface's chart jets computed once) and refits the network
+    from its previous weights: ``refit_steps`` Adam steps on the area-weighted squared error,
+    then an exact least-squares solve of the read-out layer (in which the field is linear).
+    ``scheme="euler"`` is the paper's step, one refit to ``f + dt L f`` (``L = Delta_S``);
+    ``scheme="heun"`` (default) refits to ``f* = f + dt L f`` and then to
+    ``f + dt/2 (L f + L f*)``; ``scheme="midpoint"`` to ``f* = f + dt/2 L f`` and then to
+    ``f + dt L f*``. The two-stage schemes are second order, and for this linear equation
+    identical (both multiply a mode of eigenvalue ``lambda`` by ``1 - z + z^2 / 2``,
+    ``z = lambda dt``).
 ``method="spectral"``
     ``f(t) = sum_i exp(-lambda_i t) <f, phi_i> phi_i`` through the Laplace-Beltrami
     eigenmodes (:func:`sns_np.spectral.eigenmodes`, Rayleigh-Ritz by default) and the constant
     mode; exact in time (``dt`` is validated but not needed).
 
-The explicit scheme is stable for ``dt <= h^2 / (2 pi)`` with ``h = sqrt(A / N)`` the mean
+Every explicit scheme is stable for ``dt <= h^2 / (2 pi)`` with ``h = sqrt(A / N)`` the mean
 spacing of the ``N`` sample points (docs/flows.md derives it); beyond it the flow warns or
 refuses (``stability=``). A refit that produces non-finite values, or a field whose range grows
 (the heat equation obeys a maximum principle), stops the flow with
@@ -50,7 +56,16 @@ from ..geometry._common import chart_jets, degenerate_mask, raise_degenerate
 from ..nn.optim import Adam
 from ..protocol import chunk_slices, field_jet
 from ..sampling import fibonacci_sphere, surface_sample
-from ._common import check_stability, check_times, default_points, lstsq_readout, substeps
+from ._common import (
+    DEFAULT_SCHEME,
+    SCHEMES,
+    check_scheme,
+    check_stability,
+    check_times,
+    default_points,
+    lstsq_readout,
+    substeps,
+)
 
 __all__ = ["heat_flow", "HeatFlowResult", "ModalField", "HEAT_DEFAULTS"]
 
@@ -76,7 +91,9 @@ class HeatFlowResult:
     steps : int, explicit steps taken (0 for "spectral")
     seconds : float
     stopped : str, "t_end" or the divergence message
-    info : dict, scheme details (sample size, initial fit error, projection residual, ...)
+    info : dict, scheme details: for "network" the time ``scheme`` and the number of
+        ``refits`` (one per step for Euler, two for the second-order schemes), sample size,
+        initial fit error, ...; for "spectral" the projection residual, ...
 
     Examples
     --------
@@ -233,9 +250,10 @@ class ModalField:
 
 # ------------------------------------------------------------------------------ public API
 
-def heat_flow(surface, field, t_end, dt, method: str = "network", *, times=None,
-              n_snapshots: int = 10, stability: str = "warn", rng=None,
-              progress: bool = False, **options) -> HeatFlowResult:
+def heat_flow(surface, field, t_end, dt, method: str = "network", *,
+              scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = 10,
+              stability: str = "warn", rng=None, progress: bool = False,
+              **options) -> HeatFlowResult:
     """Evolve a scalar field by the heat equation ``f_t = Delta_S f`` on a surface map.
 
     Parameters
@@ -245,10 +263,14 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *, times=None,
     t_end : float > 0
     dt : float > 0, the explicit time step ("network"; "spectral" is exact in time)
     method : {"network", "spectral"}
+    scheme : {"heun", "midpoint", "euler"}, the time scheme of "network": "heun" (default) and
+        "midpoint" are second order with two refits per step (identical for this linear
+        equation), "euler" is the paper's first-order step with one refit; validated but
+        unused by "spectral" (exact in time)
     times : sequence of floats in [0, t_end], optional, snapshot times (0 and ``t_end`` are
         always included); default ``n_snapshots + 1`` equally spaced times
     stability : {"warn", "raise", "ignore"}, what to do when ``dt`` exceeds the explicit
-        limit ``h^2 / (2 pi)`` ("network" only)
+        limit ``h^2 / (2 pi)`` ("network" only; the same limit for every scheme)
     rng : None, int or Generator (seeds the network initialisation; ``None`` means 0)
     progress : bool, a progress line on stderr
     **options
@@ -283,6 +305,7 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *, times=None,
     True
     """
     check_choice(method, "method", METHODS)
+    scheme = check_scheme(scheme)
     t_end, dt, T = check_times(t_end, dt, times, n_snapshots)
     if not callable(getattr(field, "jet", None)):
         raise TypeError(f"field must follow the field protocol (jet(p, order)); got "
@@ -296,7 +319,7 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *, times=None,
     if method == "spectral":
         return _spectral(surface, field, T, o)
     check_choice(stability, "stability", ("warn", "raise", "ignore"))
-    return _network(surface, field, T, dt, o, stability, as_generator(rng), progress)
+    return _network(surface, field, T, dt, o, stability, as_generator(rng), progress, scheme)
 
 
 # ------------------------------------------------------------------------------ spectral
@@ -393,7 +416,7 @@ def _refit(f, sample, target, steps, opt):
     return float(w @ (r * r))
 
 
-def _network(surface, field, T, dt, o, stability, rng, progress):
+def _network(surface, field, T, dt, o, stability, rng, progress, scheme):
     t_start = time.perf_counter()
     refit_steps = _pos_int(o["refit_steps"], "refit_steps", minimum=0)
     init_steps = _pos_int(o["init_steps"], "init_steps", minimum=0)
@@ -404,7 +427,8 @@ def _network(surface, field, T, dt, o, stability, rng, progress):
     area0 = surface_sample(surface, 4096, "quadrature").area
     n = default_points(area0, dt) if o["n_points"] is None else _pos_int(o["n_points"],
                                                                           "n_points", 16)
-    limit = check_stability(dt, area0, n, stability, "heat_flow(method='network')")
+    limit = check_stability(dt, area0, n, stability, "heat_flow(method='network')",
+                            scheme=scheme)
     sample = _Sample(surface, n)
 
     if isinstance(field, NeuralField):
@@ -426,28 +450,46 @@ def _network(surface, field, T, dt, o, stability, rng, progress):
     steps, t, stopped = 0, 0.0, "t_end"
     total = sum(len(substeps(a, b, dt)) for a, b in zip(T[:-1], T[1:]))
     bar = Progress(total, "heat", enabled=progress)
-    info = {"n_points": n, "area": sample.area, "initial_fit_rel_rms": init_rms,
-            "refit_steps": refit_steps, "width": f.net.width, "depth": f.net.depth}
+    info = {"scheme": scheme, "n_points": n, "area": sample.area,
+            "initial_fit_rel_rms": init_rms, "refit_steps": refit_steps, "refits": 0,
+            "width": f.net.width, "depth": f.net.depth}
     last_ms = 0.0
+    coeffs = SCHEMES[scheme]
+
+    def refit(target):
+        """Refit ``f`` to ``target``; a DivergenceError if it fails or the range grows."""
+        ms = _refit(f, sample, target, refit_steps, opt)
+        vals = f(sample.p)
+        bad = not (np.isfinite(ms) and np.all(np.isfinite(vals)))
+        spread = math.inf if bad else float(np.abs(vals - mean0).max())
+        if bad or spread > growth * range0 + 1e-12:
+            why = ("the refit produced non-finite values" if bad else
+                   f"max |f - mean| grew from {range0:.3g} to {spread:.3g} (the heat "
+                   f"equation never increases it)")
+            raise DivergenceError(
+                f"heat flow diverged at t = {t + h:.6g} (step {steps + 1}, scheme {scheme!r}): "
+                f"{why}; the last good field (t = {t:.6g}) is kept. Lower dt (stability limit "
+                f"{limit:.3g}) or lr ({lr:g})")
+        info["refits"] += 1
+        return ms
+
+    h = dt
     try:
         for a, b in zip(T[:-1], T[1:]):
             for h in substeps(a, b, dt):
                 good = f.theta.copy()
-                v, lap = sample.laplacian(f)
-                target = v + h * lap
-                last_ms = _refit(f, sample, target, refit_steps, opt)
-                vals = f(sample.p)
-                bad = not (np.isfinite(last_ms) and np.all(np.isfinite(vals)))
-                spread = math.inf if bad else float(np.abs(vals - mean0).max())
-                if bad or spread > growth * range0 + 1e-12:
+                try:
+                    v, lap = sample.laplacian(f)
+                    if coeffs is None:                     # f+ = f + h L f
+                        last_ms = refit(v + h * lap)
+                    else:                                  # f* = f + a h L f, then
+                        c_stage, c_last = coeffs           # f+ = f + h ((1-b) L f + b L f*)
+                        refit(v + c_stage * h * lap)
+                        _, lap2 = sample.laplacian(f)
+                        last_ms = refit(v + h * ((1 - c_last) * lap + c_last * lap2))
+                except DivergenceError:
                     f.theta[...] = good
-                    why = ("the refit produced non-finite values" if bad else
-                           f"max |f - mean| grew from {range0:.3g} to {spread:.3g} (the heat "
-                           f"equation never increases it)")
-                    raise DivergenceError(
-                        f"heat flow diverged at t = {t + h:.6g} (step {steps + 1}): {why}; the "
-                        f"last good field (t = {t:.6g}) is kept. Lower dt (stability limit "
-                        f"{limit:.3g}) or lr ({lr:g})")
+                    raise
                 steps += 1
                 t += h
                 bar.update(steps, t=f"{t:.4g}", fit=f"{math.sqrt(last_ms):.1e}")
