@@ -59,7 +59,9 @@ def _add_fit_options(p):
                         "normalised size) is below this")
     g.add_argument("--width", type=_positive_int, help="network width (default 256)")
     g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
-    g.add_argument("--batch", type=_positive_int, help="samples per step (default 2048)")
+    g.add_argument("--batch", type=_positive_int,
+                   help="samples per step (default: chosen from the mesh's detail, 2048 to "
+                        "512)")
     g.add_argument("--lr", type=_positive_float,
                    help="peak learning rate (default: chosen from the mesh's detail, 1e-4 "
                         "to 4e-3)")

@@ -194,14 +194,16 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
     assert smooth < 5e-3 < 2e-2 < bumpy
     opts = dict(TINY, steps=3)
-    del opts["input_scale"], opts["lr"]
+    del opts["input_scale"], opts["lr"], opts["batch"]
     S, r = fit_shape(Bobble(), **opts)
     assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
-    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup"}
+    assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
+    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
     assert r.options["input_scale"] == AUTO["smooth"]["input_scale"]
+    assert r.options["batch"] == AUTO["smooth"]["batch"] == 2048
     # a budget too short for the goals says so
     assert any("too short" in n for n in r.notes) and "too short" in r.summary()
 
