@@ -114,3 +114,16 @@ def check_positive_float(value, name: str, allow_zero: bool = False) -> float:
         bound = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name} must be finite and {bound}, got {value!r}")
     return v
+
+
+def check_output_file(path, suffix: str, what: str = "output", hint: str = ""):
+    """A file name to be written later: ``suffix`` in any case, in an existing folder; checked
+    before the work that produces it starts. Returns a :class:`~pathlib.Path`."""
+    from pathlib import Path
+    path = Path(path)
+    if path.suffix.lower() != suffix:
+        raise ValueError(f"{what} {path.name!r} must end in {suffix}{hint}")
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():
+        raise ValueError(f"{what} folder {str(folder)!r} does not exist")
+    return path

@@ -94,19 +94,14 @@ def spectra_many(models, k, *, client=None, scheduler=None, workers=None, out=No
     >>> t[0]["status"], [round(t[0][f"lambda_{i}"]) for i in (1, 2, 3)]  # l(l+1), l = 1
     ('done', [2, 2, 2])
     """
-    from .._validation import check_positive_int
+    from .._validation import check_output_file, check_positive_int
     k = check_positive_int(k, "k")
     models = [Path(m) for m in ([models] if isinstance(models, (str, Path)) else models)]
     if not models:
         raise ValueError("no models given")
     threads = check_positive_int(threads_per_fit, "threads_per_fit")
     if out is not None:
-        out = Path(out)
-        if out.suffix.lower() != ".csv":
-            raise ValueError(f"output {out.name!r} must end in .csv (the JSON goes beside it)")
-        folder = out.parent if str(out.parent) else Path(".")
-        if not folder.is_dir():
-            raise ValueError(f"output folder {str(folder)!r} does not exist")
+        out = check_output_file(out, ".csv", hint=" (the JSON goes beside it)")
     unknown = sorted(set(options) - {"L", "L_max", "tol", "n_theta"})
     if unknown:
         raise TypeError(f"unknown option(s) {', '.join(map(repr, unknown))}; expected some "

@@ -119,8 +119,8 @@ class Table:
         Examples
         --------
         >>> import os, tempfile
-        >>> path = Table([{"name": "a", "x": 0.1}]).to_csv(os.path.join(tempfile.mkdtemp(),
-        ...                                                                "t.csv"))
+        >>> d = tempfile.mkdtemp()
+        >>> path = Table([{"name": "a", "x": 0.1}]).to_csv(os.path.join(d, "t.csv"))
         >>> Table.read(path)[0]
         {'name': 'a', 'x': 0.1}
         """
@@ -140,8 +140,9 @@ class Table:
         Examples
         --------
         >>> import json, os, tempfile
+        >>> d = tempfile.mkdtemp()
         >>> path = Table([{"name": "a", "x": float("nan")}], meta={"k": 3}).to_json(
-        ...     os.path.join(tempfile.mkdtemp(), "t.json"))
+        ...     os.path.join(d, "t.json"))
         >>> json.load(open(path))["rows"]
         [{'name': 'a', 'x': None}]
         """

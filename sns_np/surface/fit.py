@@ -21,14 +21,19 @@ import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
 from .._atomic import exclusive, remove_stale_temporaries
 from .._progress import Progress
 from .._signals import deferred_signals
-from .._validation import as_generator, check_choice, check_positive_float, check_positive_int
+from .._validation import (
+    as_generator,
+    check_choice,
+    check_output_file,
+    check_positive_float,
+    check_positive_int,
+)
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
@@ -747,12 +752,7 @@ def _check_early(options):
 def _check_checkpoint_options(path, every, seconds):
     """The checkpoint's file name, folder and cadence, checked before any work."""
     if path is not None:
-        path = Path(path)
-        if path.suffix.lower() != ".npz":
-            raise ValueError(f"checkpoint {path.name!r} must end in .npz")
-        folder = path.parent if str(path.parent) else Path(".")
-        if not folder.is_dir():
-            raise ValueError(f"checkpoint folder {str(folder)!r} does not exist")
+        check_output_file(path, ".npz", "checkpoint")
     if every is not None:
         check_positive_int(every, "checkpoint_every")
     if seconds is not None:
