@@ -316,7 +316,7 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         running on the clock (over the fraction of the budget elapsed).
     batch : int
         Fresh samples per step. Default: chosen from the target's :func:`detail`, 2048 (the
-        reference's) for a smooth target, 512 for a detailed one: at the same cost, four times
+        reference's) for a smooth target, 512 for a detailed one: in the same time, 3.3 times
         as many steps of a quarter of the samples fit detail better (docs/fitting.md). A
         warm start ``net`` uses the smooth end's.
     lr, lr_min, schedule, warmup, optimizer
