@@ -38,27 +38,24 @@ from ._validation import (
     check_positive_float,
     check_positive_int,
 )
-from .errors import DegenerateMapError, ShapeError
+from .errors import ShapeError
 from .geometry import (
     area_element_from_jets,
     first_fundamental_form_from_jets,
     inverse_metric,
-    metric_conditioning,
     tangent_frame,
 )
-from .protocol import chunk_slices, directional_jet, field_jet
+from .geometry.chart import CHUNK, DEGENERATE_TOL, chart_jet_chunks
+from .protocol import chunk_slices, field_jet
 
 __all__ = [
-    "uniform_sphere", "fibonacci_sphere", "Estimate", "SurfaceSample", "surface_sample",
+    "uniform_sphere", "fibonacci_sphere", "Estimate", "surface_geometry", "SurfaceSample",
+    "surface_sample",
     "rejection_sample", "area", "integrate", "inner_product", "l2_norm", "rayleigh_quotient",
     "METHODS",
 ]
 
 METHODS = ("mc", "rejection", "quadrature")
-#: points per surface jet call
-CHUNK = 65536
-#: threshold on sigma_min / sigma_max of J R below which a map counts as degenerate
-DEGENERATE_TOL = 1e-8
 _FOUR_PI = 4.0 * math.pi
 
 
@@ -152,35 +149,42 @@ class Estimate:
 
 # ------------------------------------------------------------------------------ geometry
 
-def _tangent_jet(surface, p, R):
-    """``y`` (n, 3) and ``J R`` (n, 3, 2), by a 2-direction jet when the map offers one."""
-    return directional_jet(surface, p, 1, R)
+def surface_geometry(surface, p, chunk=CHUNK, tol=DEGENERATE_TOL):
+    """``x``, ``R``, ``I^-1`` and ``sqrt(det I)`` at unit points ``p``; raises on degeneracy.
 
+    Parameters
+    ----------
+    surface : surface map
+    p : (n, 3) float array of unit vectors
+    chunk : int, points per call of the map
+    tol : float, the degeneracy threshold of :func:`sns_np.geometry.chart.degenerate_mask`
 
-def _surface_geometry(surface, p, chunk=CHUNK, tol=DEGENERATE_TOL):
-    """``x``, ``R``, ``I^-1`` and ``sqrt(det I)`` at unit points ``p``; raises on degeneracy."""
+    Returns
+    -------
+    x : (n, 3), R : (n, 3, 2), Iinv : (n, 2, 2), area_element : (n,) float arrays
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> x, R, Iinv, d = surface_geometry(Sphere(2.0), fibonacci_sphere(4))
+    >>> d
+    array([4., 4., 4., 4.])
+    """
     n = p.shape[0]
     x = np.empty((n, 3))
     R = tangent_frame(p)
     Iinv = np.empty((n, 2, 2))
     d = np.empty(n)
-    for sl in chunk_slices(n, chunk):
-        y, JR = _tangent_jet(surface, p[sl], R[sl])
+    for sl, (y, JR), _ in chart_jet_chunks(surface, p, 1, R=R, chunk=chunk, tol=tol, detail=(
+            f"sigma_min / sigma_max of J R is below {tol:g}; integrals and the "
+            f"Laplace-Beltrami operator need a regular parametrisation")):
         I = first_fundamental_form_from_jets(JR)
-        bad = ~(metric_conditioning(I) > tol)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise DegenerateMapError(
-                f"the surface map is degenerate at sphere point {sl.start + k} "
-                f"(p = {np.array2string(p[sl][k], precision=6)}): sigma_min / sigma_max of "
-                f"J R is below {tol:g} at {int(bad.sum())} point(s); integrals and the "
-                f"Laplace-Beltrami operator need a regular parametrisation")
         x[sl], Iinv[sl], d[sl] = y, inverse_metric(I), area_element_from_jets(JR)
     return x, R, Iinv, d
 
 
 def _area_elements(surface, p, chunk=CHUNK, tol=DEGENERATE_TOL):
-    return _surface_geometry(surface, p, chunk, tol)[3]
+    return surface_geometry(surface, p, chunk, tol)[3]
 
 
 # ------------------------------------------------------------------------------ samples
@@ -407,12 +411,12 @@ def surface_sample(surface, n: int = 100_000, method: str = "mc", rng=None) -> S
         from .quadrature import sphere_quadrature
         nt = max(1, math.ceil(math.sqrt(n / 2)))
         p, v = sphere_quadrature(nt)
-        x, R, Iinv, d = _surface_geometry(surface, p)
+        x, R, Iinv, d = surface_geometry(surface, p)
         w = v * d
         return SurfaceSample(p, x, R, Iinv, d, w, "quadrature", float(w.sum()), math.nan,
                              p.shape[0])
     p = uniform_sphere(n, rng)
-    x, R, Iinv, d = _surface_geometry(surface, p)
+    x, R, Iinv, d = surface_geometry(surface, p)
     w = _FOUR_PI * d / n
     se = _FOUR_PI * float(np.std(d, ddof=1)) / math.sqrt(n) if n > 1 else math.nan
     return SurfaceSample(p, x, R, Iinv, d, w, "mc", float(w.sum()), se, n)
@@ -491,7 +495,7 @@ def rejection_sample(surface, n_target: int, rng=None, *, oversample: float = 10
         raise ValueError(f"no point was accepted (n_target = {n_target}); use a larger n_target")
     area_mc = _FOUR_PI * float(d.mean())
     area_se = _FOUR_PI * float(np.std(d, ddof=1)) / math.sqrt(M)
-    x, R, Iinv, dk = _surface_geometry(surface, p)
+    x, R, Iinv, dk = surface_geometry(surface, p)
     N = p.shape[0]
     return SurfaceSample(p, x, R, Iinv, dk, np.full(N, area_mc / N), "rejection", area_mc,
                          area_se, M)

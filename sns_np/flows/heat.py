@@ -52,9 +52,9 @@ from ..geometry import (
     sphere_field_chart_jets,
     tangent_frame,
 )
-from ..geometry._common import chart_jets, degenerate_mask, raise_degenerate
+from ..geometry.chart import chart_jet_chunks
 from ..nn.optim import Adam
-from ..protocol import chunk_slices, field_jet
+from ..protocol import field_jet
 from ..sampling import fibonacci_sphere, surface_sample
 from ._common import (
     DEFAULT_SCHEME,
@@ -371,11 +371,8 @@ class _Sample:
         self.R = tangent_frame(self.p)
         self.JR = np.empty((n, 3, 2))
         self.S2 = np.empty((n, 3, 2, 2))
-        for sl in chunk_slices(n, 16384):
-            _, JR, _, S2 = chart_jets(surface, self.p[sl], self.R[sl], 2)
-            bad = degenerate_mask(JR, tol)
-            if bad.any():
-                raise_degenerate(bad, self.p[sl], sl.start)
+        for sl, (_, JR, _, S2), _ in chart_jet_chunks(surface, self.p, 2, R=self.R, chunk=16384,
+                                                      tol=tol):
             self.JR[sl], self.S2[sl] = JR, S2
         d = np.linalg.norm(np.cross(self.JR[:, :, 0], self.JR[:, :, 1]), axis=1)
         self.w = 4 * math.pi * d / n  # equal-area lattice: integral ~= sum w_i g_i

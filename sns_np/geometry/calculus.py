@@ -16,15 +16,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import SPHERE_TOL, check_choice
-from ..protocol import chunk_slices, field_jet, surface_jet
-from ._common import (
-    CHUNK,
-    DEGENERATE_TOL,
-    chart_jets,
-    check_options,
-    degenerate_mask,
-    raise_degenerate,
-)
+from ..protocol import field_jet, surface_jet
+from .chart import CHUNK, DEGENERATE_TOL, chart_jet_chunks, check_options
 from .forms import first_fundamental_form_from_jets, inverse_metric, normals_from_jets
 from .frame import _frame, sphere_points
 
@@ -120,14 +113,6 @@ def ambient_field_chart_jets(grad_f, hess_f, JR, S2):
     return f_a, f_ab
 
 
-def _checked_chart(surface, ps, order, tol, offset):
-    out = chart_jets(surface, ps, _frame(ps), order)
-    bad = degenerate_mask(out[1], tol)
-    if bad.any():
-        raise_degenerate(bad, ps, offset)
-    return out
-
-
 def surface_gradient(surface, p, field, domain: str = "sphere", *, chunk: int = CHUNK,
                      tol: float = DEGENERATE_TOL, sphere_tol: float = SPHERE_TOL):
     """Surface gradient of a scalar field on the surface ``S(sphere)``, as vectors in R^3.
@@ -156,9 +141,8 @@ def surface_gradient(surface, p, field, domain: str = "sphere", *, chunk: int = 
     chunk, tol = check_options(chunk, tol)
     p = sphere_points(p, sphere_tol)
     out = np.empty((p.shape[0], 3))
-    for sl in chunk_slices(p.shape[0], chunk):
+    for sl, (y, JR), _ in chart_jet_chunks(surface, p, 1, chunk=chunk, tol=tol):
         ps = p[sl]
-        y, JR = _checked_chart(surface, ps, 1, tol, sl.start)
         if domain == "ambient":
             out[sl] = surface_gradient_ambient(field_jet(field, y, 1)[1], normals_from_jets(JR))
         else:
@@ -193,9 +177,8 @@ def surface_divergence(surface, p, vector_field, domain: str = "sphere", *,
     chunk, tol = check_options(chunk, tol)
     p = sphere_points(p, sphere_tol)
     out = np.empty(p.shape[0])
-    for sl in chunk_slices(p.shape[0], chunk):
+    for sl, (y, JR), _ in chart_jet_chunks(surface, p, 1, chunk=chunk, tol=tol):
         ps = p[sl]
-        y, JR = _checked_chart(surface, ps, 1, tol, sl.start)
         if domain == "ambient":
             JF = surface_jet(vector_field, y, 1)[1]
             out[sl] = surface_divergence_ambient(JF, normals_from_jets(JR))

@@ -18,13 +18,19 @@ import numpy as np
 
 from .._validation import SPHERE_TOL, check_choice
 from ..protocol import chunk_slices, field_jet, surface_jet
-from ._common import CHUNK, DEGENERATE_TOL, check_options, degenerate_mask, raise_degenerate
 from .calculus import (
     DOMAINS,
-    _checked_chart,
     ambient_field_chart_jets,
     sphere_field_chart_jets,
     surface_divergence_from_jets,
+)
+from .chart import (
+    CHUNK,
+    DEGENERATE_TOL,
+    check_options,
+    checked_chart_jets,
+    degenerate_mask,
+    raise_degenerate,
 )
 from .forms import (
     first_fundamental_form_from_jets,
@@ -124,7 +130,7 @@ def sphere_field_extension(grad_g, hess_g, J, D2):
 
 def _mean_curvature_chunk(surface, ps, field, domain, tol, offset):
     if domain == "ambient":
-        y, JR, _, S2 = _checked_chart(surface, ps, 2, tol, offset)
+        y, JR, _, S2 = checked_chart_jets(surface, ps, None, 2, tol, offset)
         _, grad_f, hess_f = field_jet(field, y, 2)
     else:
         # the extension g o S^-1 needs the full 3 x 3 J and all of D2
@@ -147,7 +153,7 @@ def _mean_curvature_chunk(surface, ps, field, domain, tol, offset):
 
 
 def _divgrad_chunk(surface, ps, field, domain, tol, offset):
-    y, JR, _, S2 = _checked_chart(surface, ps, 2, tol, offset)
+    y, JR, _, S2 = checked_chart_jets(surface, ps, None, 2, tol, offset)
     if domain == "ambient":
         _, grad_f, hess_f = field_jet(field, y, 2)
         f_a, f_ab = ambient_field_chart_jets(grad_f, hess_f, JR, S2)

@@ -12,15 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import SPHERE_TOL, check_choice
-from ..protocol import chunk_slices
-from ._common import (
-    CHUNK,
-    DEGENERATE_TOL,
-    chart_jets,
-    check_options,
-    degenerate_mask,
-    raise_degenerate,
-)
+from .chart import CHUNK, DEGENERATE_TOL, chart_jet_chunks, check_options
 from .forms import (
     area_element_from_jets,
     first_fundamental_form_from_jets,
@@ -28,7 +20,7 @@ from .forms import (
     principal_from_jets,
     second_fundamental_form_from_jets,
 )
-from .frame import _frame, sphere_points
+from .frame import sphere_points
 
 __all__ = [
     "DifferentialQuantities", "differential_quantities", "normals", "first_fundamental_form",
@@ -124,12 +116,9 @@ def differential_quantities(surface, p, *, on_degenerate: str = "raise",
     N = p.shape[0]
     out = {k: np.empty((N,) + s) for k, s in _SHAPES.items()}
     valid = np.ones(N, dtype=bool)
-    for sl in chunk_slices(N, chunk):
-        ps = p[sl]
-        y, JR, _, S2 = chart_jets(surface, ps, _frame(ps), 2)
-        bad = degenerate_mask(JR, tol)
-        if on_degenerate == "raise" and bad.any():
-            raise_degenerate(bad, ps, sl.start)
+    mode = "raise" if on_degenerate == "raise" else "flag"
+    for sl, (y, JR, _, S2), bad in chart_jet_chunks(surface, p, 2, chunk=chunk, tol=tol,
+                                                    on_degenerate=mode):
         with np.errstate(invalid="ignore", divide="ignore"):
             n = normals_from_jets(JR)
             II = second_fundamental_form_from_jets(S2, n)
@@ -151,8 +140,7 @@ def _first_order(surface, p, chunk, sphere_tol, fn, shape):
     p = sphere_points(p, sphere_tol)
     N = p.shape[0]
     out = np.empty((N,) + shape)
-    for sl in chunk_slices(N, int(chunk)):
-        _, JR = chart_jets(surface, p[sl], _frame(p[sl]), 1)
+    for sl, (_, JR), _ in chart_jet_chunks(surface, p, 1, chunk=int(chunk), on_degenerate="flag"):
         out[sl] = fn(JR)
     return out
 

@@ -39,7 +39,7 @@ import scipy.linalg
 from .._progress import Progress
 from .._validation import check_positive_float, check_positive_int
 from ..quadrature import sphere_quadrature
-from ..sampling import _surface_geometry
+from ..sampling import surface_geometry
 from .harmonics import HarmonicField, evaluate_expansions, n_harmonics, real_sh
 from .result import EigenResult
 
@@ -97,7 +97,7 @@ def assemble(surface, L: int, n_theta: int | None = None, chunk: int = CHUNK):
     L = check_positive_int(L, "L")
     nt = quadrature_size(L) if n_theta is None else check_positive_int(n_theta, "n_theta")
     p, v = sphere_quadrature(nt)
-    _, R, Iinv, d = _surface_geometry(surface, p)
+    _, R, Iinv, d = surface_geometry(surface, p)
     W = v * d
     # I^-1 = U U^T (2 x 2 Cholesky), so that (R^T g)^T I^-1 (R^T g) = |U^T R^T g|^2
     a = np.sqrt(Iinv[:, 0, 0])
