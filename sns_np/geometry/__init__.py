@@ -15,8 +15,9 @@ Calling the map
 
 From jets already computed (``*_from_jets`` and friends)
     :func:`tangent_jacobian`, :func:`frame_jets`, :func:`sphere_second_derivatives`,
-    :func:`normals_from_jets`, :func:`first_fundamental_form_from_jets`,
-    :func:`area_element_from_jets`, :func:`inverse_metric`,
+    :func:`normals_from_jets`, :func:`normals_from_tangents`,
+    :func:`first_fundamental_form_from_jets`, :func:`area_element_from_jets`,
+    :func:`inverse_metric`,
     :func:`second_fundamental_form_from_jets`, :func:`curvatures_from_forms`,
     :func:`principal_from_jets`, :func:`metric_conditioning`,
     :func:`surface_gradient_from_jets`, :func:`surface_divergence_from_jets`,
@@ -52,6 +53,7 @@ from .forms import (
     inverse_metric,
     metric_conditioning,
     normals_from_jets,
+    normals_from_tangents,
     principal_from_jets,
     second_fundamental_form_from_jets,
     sphere_second_derivatives,
@@ -84,6 +86,7 @@ __all__ = [
     "principal_curvatures", "principal_directions",
     "surface_gradient", "surface_divergence", "laplace_beltrami",
     "tangent_jacobian", "frame_jets", "sphere_second_derivatives", "normals_from_jets",
+    "normals_from_tangents",
     "first_fundamental_form_from_jets", "area_element_from_jets", "inverse_metric",
     "second_fundamental_form_from_jets", "curvatures_from_forms", "principal_from_jets",
     "metric_conditioning", "surface_gradient_from_jets", "surface_divergence_from_jets",

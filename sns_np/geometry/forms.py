@@ -17,6 +17,7 @@ import numpy as np
 
 __all__ = [
     "tangent_jacobian", "sphere_second_derivatives", "frame_jets", "normals_from_jets",
+    "normals_from_tangents",
     "first_fundamental_form_from_jets", "area_element_from_jets", "inverse_metric",
     "second_fundamental_form_from_jets", "curvatures_from_forms", "principal_from_jets",
     "metric_conditioning",
@@ -82,18 +83,66 @@ def frame_jets(J: np.ndarray, D2: np.ndarray, R: np.ndarray, p: np.ndarray):
     return JR, sphere_second_derivatives(D2R, np.einsum("kia,ka->ki", J, p))
 
 
-def normals_from_jets(JR: np.ndarray) -> np.ndarray:
-    """Unit normal ``n = S_u x S_v / |S_u x S_v|`` (paper Eq. 5), outward for an
-    orientation-preserving map. Degenerate rows (``S_u x S_v = 0``) give NaN.
+#: what :func:`normals_from_tangents` returns where ``S_u x S_v = 0``
+DEGENERATE_NORMALS = ("nan", "zero")
+
+
+def normals_from_tangents(Su: np.ndarray, Sv: np.ndarray, *, degenerate: str = "nan"):
+    """Unit normals ``n = S_u x S_v / |S_u x S_v|`` (paper Eq. 5) and the norms ``|S_u x S_v|``.
+
+    The one normal computation of the package. Policy where the tangents are degenerate
+    (``S_u x S_v = 0``):
+
+    * ``degenerate="nan"`` (geometry): the normal is undefined and comes back NaN, so a
+      reported quantity can never look valid there; the geometry functions flag such points
+      with :func:`sns_np.geometry.chart.degenerate_mask` (or raise) before using ``n``.
+    * ``degenerate="zero"`` (training losses): the norm is clamped to the dtype's smallest
+      normal number, so ``n = 0`` there and every value stays finite; the position + normal
+      loss and its cotangents (:func:`sns_np.surface.position_normal_loss`) divide by the same
+      clamped norm, so a momentarily degenerate network point cannot turn a step into NaN.
+
+    Both agree bitwise wherever ``|S_u x S_v| >= tiny``.
+
+    Parameters
+    ----------
+    Su, Sv : (n, 3) float arrays (float32 or float64; the result keeps the dtype)
+    degenerate : {"nan", "zero"}
+
+    Returns
+    -------
+    n : (n, 3) float array
+    norm : (n,) float array, ``|S_u x S_v|`` (the area element when ``S_u, S_v`` come from the
+        orthonormal frame)
+
+    Examples
+    --------
+    >>> n, norm = normals_from_tangents(np.array([[2.0, 0, 0]]), np.array([[0, 3.0, 0]]))
+    >>> n.tolist(), norm.tolist()
+    ([[0.0, 0.0, 1.0]], [6.0])
+    >>> normals_from_tangents(np.zeros((1, 3)), np.zeros((1, 3)), degenerate="zero")[0]
+    array([[0., 0., 0.]])
+    """
+    if degenerate not in DEGENERATE_NORMALS:
+        raise ValueError(f"degenerate must be one of {DEGENERATE_NORMALS}, got {degenerate!r}")
+    c = np.cross(Su, Sv)
+    norm = np.linalg.norm(c, axis=1)
+    if degenerate == "zero":
+        return c / np.maximum(norm, np.finfo(c.dtype).tiny)[:, None], norm
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return c / norm[:, None], norm
+
+
+def normals_from_jets(JR: np.ndarray, *, degenerate: str = "nan") -> np.ndarray:
+    """Unit normal ``n = S_u x S_v / |S_u x S_v|`` (paper Eq. 5) from ``JR = [S_u, S_v]``
+    (n, 3, 2), outward for an orientation-preserving map. Degenerate rows give NaN (the
+    policy of :func:`normals_from_tangents`).
 
     Examples
     --------
     >>> normals_from_jets(np.eye(3)[None, :, :2])
     array([[0., 0., 1.]])
     """
-    c = np.cross(JR[:, :, 0], JR[:, :, 1])
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return c / np.linalg.norm(c, axis=1, keepdims=True)
+    return normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate=degenerate)[0]
 
 
 def first_fundamental_form_from_jets(JR: np.ndarray) -> np.ndarray:

@@ -214,7 +214,7 @@ class _ShapeTarget:
         from ..protocol import surface_jet
         y, J = surface_jet(self.shape, p, 1)
         JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
-        nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1])
+        nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
         return (y - self.center) / self.scale, nrm
 
 
@@ -856,7 +856,7 @@ def _gauss_newton_readout(net, target, rng, normal_weight, tangent_weight=1.0, n
     def residuals(W):
         y = h @ W.T + (net.b3.astype(np.float64) if net.bias else 0.0)
         Su, Sv = hD[:, :, 0] @ W.T, hD[:, :, 1] @ W.T
-        nrm, c = normals_from_tangents(Su, Sv)
+        nrm, c = normals_from_tangents(Su, Sv, degenerate="zero")
         rp = np.einsum("kab,kb->ka", Mh, y - q)
         return rp, sw * (nrm - nt), Su, Sv, nrm, c
 
@@ -918,7 +918,7 @@ def _evaluate(surface, target, n_eval):
     q = target.center + target.scale * q
     y, J = surface.jet(p, 1)
     JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
-    n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1])
+    n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
     err = np.linalg.norm(y - q, axis=1)
     ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nt), -1.0, 1.0)))
     return FitReport(position_mean=float(err.mean()), position_rms=float(np.sqrt((err ** 2)

@@ -21,30 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
+# the one normal function (geometry owns it); re-exported here and from sns_np.surface
+from ..geometry.forms import normals_from_tangents
+
 __all__ = ["normals_from_tangents", "position_normal_loss"]
-
-
-def normals_from_tangents(Su, Sv):
-    """Unit normals n = (S_u x S_v) / |S_u x S_v| and the norms |S_u x S_v|.
-
-    Parameters
-    ----------
-    Su, Sv : (n, 3) float arrays
-
-    Returns
-    -------
-    n : (n, 3) float array
-    norm : (n,) float array
-
-    Examples
-    --------
-    >>> n, norm = normals_from_tangents(np.array([[2.0, 0, 0]]), np.array([[0, 3.0, 0]]))
-    >>> n.tolist(), norm.tolist()
-    ([[0.0, 0.0, 1.0]], [6.0])
-    """
-    c = np.cross(Su, Sv)
-    norm = np.linalg.norm(c, axis=1)
-    return c / np.maximum(norm, np.finfo(c.dtype).tiny)[:, None], norm
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
@@ -96,7 +76,7 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     if not normal_weight:
         return loss, dy, None, parts
     Su, Sv = JD[:, :, 0], JD[:, :, 1]
-    n, norm = normals_from_tangents(Su, Sv)
+    n, norm = normals_from_tangents(Su, Sv, degenerate="zero")
     dn = n - normals
     sq_nrm = float(np.einsum("ij,ij->", dn, dn))
     loss += normal_weight * sq_nrm / n_total
