@@ -18,6 +18,9 @@ from .operators import cotan_laplacian, face_areas, mass_matrix
 
 __all__ = ["laplacian_eigenmodes", "eigenvalues"]
 
+#: ``mass=`` of the solver -> kind of :func:`sns_np.mesh.mass_matrix`. The diagonal
+#: barycentric mass is called "lumped" here (the FEM name); "barycentric", the mass-matrix kind,
+#: is accepted as the same thing so that either name works in either place.
 _MASS = {"full": "full", "lumped": "barycentric", "barycentric": "barycentric",
          "voronoi": "voronoi"}
 
@@ -72,7 +75,8 @@ def laplacian_eigenmodes(V, F, k: int, *, mass: str = "full", return_vectors: bo
         Number of non-zero eigenvalues, ``1 <= k <= n - 2``.
     mass : {"full", "lumped", "voronoi"}
         Consistent (Galerkin) mass matrix, which converges from above for the sphere, or the
-        diagonal barycentric ("lumped") or mixed-Voronoi one.
+        diagonal barycentric ("lumped"; ``"barycentric"`` is accepted as the same) or
+        mixed-Voronoi one.
     return_vectors : bool
         Also return the eigenfunctions.
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._validation import check_choice, check_positive_int
+from .._validation import check_positive_int
 
 __all__ = ["mesh_eigenvalues", "fem_eigenvalues", "richardson"]
 
@@ -27,16 +27,18 @@ __all__ = ["mesh_eigenvalues", "fem_eigenvalues", "richardson"]
 def mesh_eigenvalues(V, F, k: int, mass: str = "full", return_vectors: bool = False):
     """The ``k`` smallest non-zero eigenvalues of the cotangent Laplacian of a closed mesh.
 
-    Solves ``-L phi = lambda M phi`` by shift-invert Lanczos (``scipy.sparse.linalg.eigsh``)
-    about a small negative shift, and drops the zero eigenvalue of the constants. Uses
-    :func:`sns_np.mesh.laplacian_eigenmodes` when the mesh package provides it.
+    The package's one FEM eigensolver is :func:`sns_np.mesh.laplacian_eigenmodes` (shift-invert
+    Lanczos on ``-L phi = lambda M phi``, the zero eigenvalue of the constants dropped); this
+    is the same call with ``mass`` and ``return_vectors`` also accepted by position.
 
     Parameters
     ----------
     V : (n, 3) float array
     F : (m, 3) int array, a closed connected mesh
     k : int, number of non-zero eigenvalues (``k + 1 < n``)
-    mass : {"full", "barycentric", "voronoi"}, see :func:`sns_np.mesh.mass_matrix`
+    mass : {"full", "lumped", "voronoi"}, see :func:`sns_np.mesh.laplacian_eigenmodes`
+        (``"barycentric"``, the :func:`sns_np.mesh.mass_matrix` kind, is the same as
+        ``"lumped"``)
     return_vectors : bool, also return the M-orthonormal eigenvectors (n, k)
 
     Returns
@@ -52,36 +54,9 @@ def mesh_eigenvalues(V, F, k: int, mass: str = "full", return_vectors: bool = Fa
     >>> bool(np.allclose(lam, 2.0, rtol=0.02))
     True
     """
-    k = check_positive_int(k, "k")
-    check_choice(mass, "mass", ("full", "barycentric", "voronoi"))
-    V = np.asarray(V, dtype=np.float64)
-    if k + 2 > V.shape[0]:
-        raise ValueError(f"k = {k} eigenvalues need a mesh with more than {k + 2} vertices, "
-                         f"got {V.shape[0]}")
-    try:  # the mesh package's solver when it has one
-        from ..mesh import laplacian_eigenmodes
-    except ImportError:
-        laplacian_eigenmodes = None
-    if laplacian_eigenmodes is not None:
-        return laplacian_eigenmodes(V, F, k, mass=mass, return_vectors=return_vectors)
-    return _eigenmodes(V, F, k, mass, return_vectors)
+    from ..mesh import laplacian_eigenmodes
 
-
-def _eigenmodes(V, F, k, mass, return_vectors):
-    """Fallback: shift-invert Lanczos on the cotangent pencil (scipy's generalised mode)."""
-    import scipy.sparse.linalg as sla
-
-    from ..mesh import cotan_laplacian, mass_matrix, surface_area
-
-    K = -cotan_laplacian(V, F)
-    M = mass_matrix(V, F, mass)
-    # a shift below 0 keeps K - sigma M positive definite (K is singular on constants)
-    sigma = -1e-3 * 4.0 * np.pi / surface_area(V, F)
-    v0 = np.ones(V.shape[0])
-    lam, phi = sla.eigsh(K.tocsc(), k=k + 1, M=M.tocsc(), sigma=sigma, which="LM", v0=v0)
-    order = np.argsort(lam)
-    lam, phi = lam[order][1:], phi[:, order][:, 1:]
-    return (lam, phi) if return_vectors else lam
+    return laplacian_eigenmodes(V, F, k, mass=mass, return_vectors=return_vectors)
 
 
 def fem_eigenvalues(surface, k: int, level: int, mass: str = "full") -> np.ndarray:
