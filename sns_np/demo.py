@@ -110,6 +110,7 @@ def run_demo(level=4, out=None, progress=True, print_fn=print, **fit_options):
     from .geometry import differential_quantities
     from .mesh import check, spherical_embedding
     from .quadrature import sphere_quadrature
+    from .sampling import uniform_sphere
     from .shapes import Ellipsoid
     from .surface import fit_mesh
 
@@ -128,8 +129,7 @@ def run_demo(level=4, out=None, progress=True, print_fn=print, **fit_options):
 
     # geometry against the closed forms, at held-out points
     g = np.random.default_rng(2024)
-    p = g.standard_normal((20000, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = uniform_sphere(20000, g)
     dq = differential_quantities(surface, p)
     foot = ellipsoid_foot_point(dq.x)
     n_ref, H_ref, K_ref = ellipsoid_geometry(foot)

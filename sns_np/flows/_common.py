@@ -1,5 +1,5 @@
-"""Shared pieces of the flows (private): time grids, sample points, the stability limit,
-least-squares read-outs and atomic output folders."""
+"""Shared pieces of the flows (private): time grids, sample points, the stability limit
+and atomic output folders (the least-squares read-outs live in :mod:`sns_np.surface.readout`)."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import numpy as np
 from .._atomic import write_folder
 from .._validation import check_choice, check_positive_float
 from ..sampling import fibonacci_sphere
+from ..surface.readout import lstsq_readout, surface_readout  # noqa: F401 (used by the flows)
 
 STABILITY_MODES = ("warn", "raise", "ignore")
 
@@ -162,33 +163,6 @@ def check_stability(dt, area, n_points, mode, what, during="", scheme="euler"):
 def default_points(area, dt, lo=64, hi=10242):
     """Sample count meeting the stability limit, clipped to ``[lo, hi]`` (10,242: the paper's)."""
     return int(min(hi, max(lo, math.floor(area / (2.0 * math.pi * dt)))))
-
-
-def lstsq_readout(features, residual, rel_reg=1e-10):
-    """``delta`` (width, k) minimising ``|features delta - residual|^2`` (+ a tiny ridge)."""
-    H = np.asarray(features, dtype=np.float64)
-    G = H.T @ H
-    G[np.diag_indices_from(G)] += rel_reg * max(np.trace(G) / G.shape[0], 1e-300)
-    return np.linalg.solve(G, H.T @ np.asarray(residual, dtype=np.float64))
-
-
-def surface_readout(net, p, q):
-    """Set the read-out layer of a surface network to the least-squares fit of ``q`` at ``p``.
-
-    The network is linear in ``W3`` (and ``b3``): ``y = h W3^T + b3``. One exact solve is a
-    Gauss-Newton step in the last layer; a uniform scaling of the output (a shrinking sphere)
-    is captured exactly.
-    """
-    H = net.features(p).astype(np.float64)
-    if net.bias:
-        H = np.hstack([H, np.ones((H.shape[0], 1))])
-    y = H[:, :net.width] @ net.W3.T.astype(np.float64)
-    if net.bias:
-        y = y + net.b3
-    d = lstsq_readout(H, q - y)
-    net.W3[...] += d[:net.width].T
-    if net.bias:
-        net.b3[...] += d[net.width]
 
 
 def atomic_folder(out, write, overwrite=False):

@@ -225,8 +225,8 @@ class SphereLocator:
         --------
         >>> from sns_np.mesh import icosphere
         >>> V, F = icosphere(2)
-        >>> p = np.random.default_rng(0).standard_normal((1000, 3))
-        >>> p /= np.linalg.norm(p, axis=1, keepdims=True)
+        >>> from sns_np.sampling import uniform_sphere
+        >>> p = uniform_sphere(1000, rng=0)
         >>> f, beta = SphereLocator(V, F).locate(p)
         >>> f.shape, beta.shape, bool((beta >= 0).all()), bool(np.allclose(beta.sum(axis=1), 1))
         ((1000,), (1000, 3), True, True)

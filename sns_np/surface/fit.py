@@ -38,6 +38,7 @@ from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
 from ..nn.optim import Schedule, make_optimizer
+from ..sampling import uniform_sphere
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
@@ -205,8 +206,7 @@ class _ShapeTarget:
         self.fingerprint = f"shape:{type(shape).__name__}:{_fingerprint(y[:64], None)}"
 
     def sample(self, n, rng):
-        p = rng.standard_normal((n, 3))
-        p /= np.linalg.norm(p, axis=1, keepdims=True)
+        p = uniform_sphere(n, rng)
         q, nrm = self.evaluate_at(p)
         return p, q, nrm
 
@@ -766,8 +766,7 @@ def _probe_step_time(o, repeats=2):
     net = ResidualMLP(width=o["width"], depth=o["depth"], seed=g, dtype=np.dtype(o["dtype"]))
     # an automatic batch is not known yet: the smallest it can be (lenient)
     batch = o["batch"] or min(end["batch"] for end in AUTO.values())
-    p = g.standard_normal((batch, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = uniform_sphere(batch, g)
     pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
 
     def loss_fn(y, JD, sl):
@@ -912,8 +911,7 @@ def _ridge_readout(net, target, rng, n=8192, rel_reg=1e-6):
 def _evaluate(surface, target, n_eval):
     """Held-out errors at n_eval fixed sphere points (seeded apart from training)."""
     g = np.random.default_rng(2**31 - 1)
-    p = g.standard_normal((n_eval, 3))
-    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    p = uniform_sphere(n_eval, g)
     q, nt = target.evaluate_at(p)
     q = target.center + target.scale * q
     y, J = surface.jet(p, 1)

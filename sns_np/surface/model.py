@@ -143,7 +143,7 @@ class SphericalNeuralSurface:
 
     @classmethod
     def fit_sdf(cls, sdf, **options):
-        """Fit a surface to the zero set of a signed distance function (sns_np.flows).
+        """Fit a surface to the zero set of a signed distance function (:mod:`sns_np.surface.sdf`).
 
         Examples
         --------
@@ -153,7 +153,7 @@ class SphericalNeuralSurface:
         >>> bool(report.relative_mean < 0.02)
         True
         """
-        from ..flows import fit_sdf
+        from .sdf import fit_sdf
         return fit_sdf(sdf, **options)
 
     # ------------------------------------------------------------------ output
