@@ -9,16 +9,11 @@ import numpy as np
 import pytest
 
 from sns_np.errors import ModelFileError, ShapeError
-from sns_np.fields import (
-    NeuralField,
-    eigen_loss,
-    orthogonality_loss,
-    rayleigh_loss,
-    unit_norm_loss,
-)
+from sns_np.fields import NeuralField
 from sns_np.nn import ResidualMLP
 from sns_np.sampling import rayleigh_quotient, rejection_sample, surface_sample
 from sns_np.shapes import PerturbedEllipsoid, Sphere, SphericalHarmonic
+from sns_np.spectral import eigen_loss, orthogonality_loss, rayleigh_loss, unit_norm_loss
 from sns_np.testing import check_gradient, check_jet
 
 from .conftest import NOJIT, sphere_points

@@ -283,6 +283,12 @@ class ResidualMLP:
         """The live parameter buffer (n_params,); writing to it changes the network."""
         return self._theta
 
+    @property
+    def single_pass(self) -> bool:
+        """True when the network runs on the per-point Numba kernels (width <= SMALL_WIDTH):
+        :meth:`value_and_grad` then calls its ``loss_fn`` once, with all the points."""
+        return self.width <= SMALL_WIDTH
+
     def copy(self) -> ResidualMLP:
         """An independent network with the same architecture and parameters.
 

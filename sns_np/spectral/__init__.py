@@ -10,7 +10,9 @@
 ``"neural"`` (:func:`neural_eigenmodes`)
     The paper's method: one small network per mode, trained sequentially on the Rayleigh
     quotient with orthogonality and unit-norm penalties. The eigenfunctions are
-    :class:`~sns_np.fields.NeuralField` objects.
+    :class:`~sns_np.fields.NeuralField` objects; their losses (paper Eqs. 25-27, with
+    hand-written parameter gradients) are :func:`eigen_loss` and its parts
+    :func:`rayleigh_loss`, :func:`orthogonality_loss`, :func:`unit_norm_loss`.
 
 Mesh reference: :func:`mesh_eigenvalues`, :func:`fem_eigenvalues` (cotangent FEM on the
 icosphere pushed through the map) and :func:`richardson`. Export: :func:`eigenmodes_on_mesh`.
@@ -28,6 +30,7 @@ from __future__ import annotations
 from .._validation import check_choice, check_positive_int
 from .fem import fem_eigenvalues, mesh_eigenvalues, richardson
 from .harmonics import HarmonicField, n_harmonics, real_sh, sh_index
+from .losses import EigenLoss, eigen_loss, orthogonality_loss, rayleigh_loss, unit_norm_loss
 from .neural import neural_eigenmodes
 from .result import EigenResult, eigenmodes_on_mesh
 from .ritz import assemble, default_degree, ritz_eigenmodes
@@ -36,6 +39,7 @@ __all__ = [
     "eigenmodes", "EigenResult", "eigenmodes_on_mesh", "ritz_eigenmodes", "neural_eigenmodes",
     "assemble", "default_degree", "HarmonicField", "real_sh", "sh_index", "n_harmonics",
     "mesh_eigenvalues", "fem_eigenvalues", "richardson", "METHODS",
+    "EigenLoss", "eigen_loss", "rayleigh_loss", "orthogonality_loss", "unit_norm_loss",
 ]
 
 METHODS = ("ritz", "neural")

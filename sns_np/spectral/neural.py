@@ -54,9 +54,10 @@ from .._validation import (
     check_positive_int,
 )
 from ..errors import DivergenceError
-from ..fields import NeuralField, eigen_loss
+from ..fields import NeuralField
 from ..nn.optim import Schedule, make_optimizer
 from ..sampling import rejection_sample, surface_sample
+from .losses import eigen_loss
 from .result import EigenResult
 
 __all__ = ["neural_eigenmodes", "DEFAULTS"]
