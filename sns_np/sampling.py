@@ -473,10 +473,11 @@ def rejection_sample(surface, n_target: int, rng=None, *, oversample: float = 10
         raise ValueError(f"oversample must be >= 1, got {oversample}")
     max_proposals = check_positive_int(max_proposals, "max_proposals")
     gen = as_generator(rng)
-    M = max(int(math.ceil(oversample * n_target)), 2)
-    if M > max_proposals:
-        raise ValueError(f"oversample * n_target = {M} exceeds max_proposals = {max_proposals}")
-    P = uniform_sphere(M, gen)
+    n_prop = max(int(math.ceil(oversample * n_target)), 2)
+    if n_prop > max_proposals:
+        raise ValueError(f"oversample * n_target = {n_prop} exceeds max_proposals = "
+                         f"{max_proposals}")
+    P = uniform_sphere(n_prop, gen)
     d = _area_elements(surface, P)
     while n_target * d.max() > d.sum():
         if 2 * P.shape[0] > max_proposals:
@@ -488,17 +489,17 @@ def rejection_sample(surface, n_target: int, rng=None, *, oversample: float = 10
         extra = uniform_sphere(P.shape[0], gen)
         P = np.concatenate([P, extra])
         d = np.concatenate([d, _area_elements(surface, extra)])
-    M = P.shape[0]
-    keep = gen.random(M) < n_target * d / d.sum()
+    n_prop = P.shape[0]
+    keep = gen.random(n_prop) < n_target * d / d.sum()
     p = P[keep]
     if p.shape[0] == 0:
         raise ValueError(f"no point was accepted (n_target = {n_target}); use a larger n_target")
     area_mc = _FOUR_PI * float(d.mean())
-    area_se = _FOUR_PI * float(np.std(d, ddof=1)) / math.sqrt(M)
+    area_se = _FOUR_PI * float(np.std(d, ddof=1)) / math.sqrt(n_prop)
     x, R, Iinv, dk = surface_geometry(surface, p)
     N = p.shape[0]
     return SurfaceSample(p, x, R, Iinv, dk, np.full(N, area_mc / N), "rejection", area_mc,
-                         area_se, M)
+                         area_se, n_prop)
 
 
 # ------------------------------------------------------------------------------ integrals

@@ -238,10 +238,10 @@ def _cmcf(V, F, tau, max_steps, round_tol):
     step = 0
     for step in range(1, max_steps + 1):  # noqa: B007 (reported)
         M = mass_matrix(X, F, "barycentric")
-        K = (M - tau * L).tocsc()
-        # K is symmetric positive definite: a symmetric ordering without pivoting is exact
+        system = (M - tau * L).tocsc()
+        # system is symmetric positive definite: a symmetric ordering without pivoting is exact
         # and ~50x faster than the default partial pivoting
-        lu = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+        lu = spla.splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                        options={"SymmetricMode": True})
         X = lu.solve(M @ X)
         if not np.all(np.isfinite(X)):

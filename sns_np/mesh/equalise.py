@@ -65,8 +65,8 @@ class _Grid:
 
     def diffuse(self, rho, dt):
         if dt not in self._lu:
-            K = (self.M - dt * self.L).tocsc()
-            self._lu[dt] = spla.splu(K, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+            system = (self.M - dt * self.L).tocsc()
+            self._lu[dt] = spla.splu(system, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                                      options={"SymmetricMode": True})
         return self._lu[dt].solve(self.m * rho)
 

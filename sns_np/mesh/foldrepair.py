@@ -162,8 +162,8 @@ class FoldRepair:
         Pb = P[boundary]
         ub = np.stack([Pb @ e1, Pb @ e2], axis=1) / (Pb @ c)[:, None]
         Wi = self.W[inside]
-        K = sp.identity(inside.size, format="csc") - Wi[:, inside].tocsc()
-        u = np.asarray(spla.spsolve(K, Wi[:, boundary] @ ub)).reshape(-1, 2)
+        system = sp.identity(inside.size, format="csc") - Wi[:, inside].tocsc()
+        u = np.asarray(spla.spsolve(system, Wi[:, boundary] @ ub)).reshape(-1, 2)
         if not np.all(np.isfinite(u)):
             return False
         X = c + u[:, :1] * e1 + u[:, 1:] * e2
@@ -303,8 +303,8 @@ def tutte_sphere(V, F, W=None, cap_degrees: float = 75.0) -> np.ndarray:
     inner = np.setdiff1d(np.arange(n), np.concatenate([[v0], ring]))
     if inner.size:
         Wi = W[inner]
-        K = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
-        U[inner] = np.asarray(spla.spsolve(K, Wi[:, ring] @ U[ring])).reshape(-1, 2)
+        system = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
+        U[inner] = np.asarray(spla.spsolve(system, Wi[:, ring] @ U[ring])).reshape(-1, 2)
     for mirror in (1.0, -1.0):
         X = np.column_stack([U[:, 0], mirror * U[:, 1], -np.ones(n)])
         X[v0] = [0.0, 0.0, 1.0]

@@ -90,7 +90,7 @@ def _powers(x, y, L, order):
     return out
 
 
-def _product(A, dA, HA, P, order):
+def _product(A, dA, D2A, P, order):
     """Jets of ``F = A(z, rho) * P(x, y)`` from A's partials and P's ambient jets."""
     a, p = A[0], P[0]
     F = a * p
@@ -99,9 +99,9 @@ def _product(A, dA, HA, P, order):
     grad = p[:, None] * dA + a[:, None] * P[1]
     if order == 1:
         return F, grad, None
-    H = (p[:, None, None] * HA + a[:, None, None] * P[2]
-         + dA[:, :, None] * P[1][:, None, :] + P[1][:, :, None] * dA[:, None, :])
-    return F, grad, H
+    D2 = (p[:, None, None] * D2A + a[:, None, None] * P[2]
+          + dA[:, :, None] * P[1][:, None, :] + P[1][:, :, None] * dA[:, None, :])
+    return F, grad, D2
 
 
 def _iterate(X, L, order):
@@ -139,24 +139,24 @@ def _iterate(X, L, order):
                 nxt += [np.zeros(n)] * (6 - len(nxt))
                 prev, cur = cur, nxt
             A = cur
-            dA = HA = None
+            dA = D2A = None
             if order >= 1:
                 dA = A[1][:, None] * ez + A[2][:, None] * drho
             if order == 2:
-                HA = (A[3][:, None, None] * (ez[:, :, None] * ez[:, None, :])
-                      + A[4][:, None, None] * (ez[:, :, None] * drho[:, None, :]
-                                               + drho[:, :, None] * ez[:, None, :])
-                      + A[5][:, None, None] * (drho[:, :, None] * drho[:, None, :])
-                      + 2.0 * A[2][:, None, None] * eye)
+                D2A = (A[3][:, None, None] * (ez[:, :, None] * ez[:, None, :])
+                       + A[4][:, None, None] * (ez[:, :, None] * drho[:, None, :]
+                                                + drho[:, :, None] * ez[:, None, :])
+                       + A[5][:, None, None] * (drho[:, :, None] * drho[:, None, :])
+                       + 2.0 * A[2][:, None, None] * eye)
             Pc, Ps = powers[m]
             s = math.sqrt(2.0) if m > 0 else 1.0
-            F, G, H = _product(A, dA, HA, Pc, order)
-            yield sh_index(l, m), s * F, None if G is None else s * G, None if H is None \
-                else s * H
+            F, G, D2 = _product(A, dA, D2A, Pc, order)
+            yield sh_index(l, m), s * F, None if G is None else s * G, None if D2 is None \
+                else s * D2
             if m > 0:
-                F, G, H = _product(A, dA, HA, Ps, order)
-                yield sh_index(l, -m), s * F, None if G is None else s * G, None if H is None \
-                    else s * H
+                F, G, D2 = _product(A, dA, D2A, Ps, order)
+                yield sh_index(l, -m), s * F, None if G is None else s * G, None if D2 is None \
+                    else s * D2
 
 
 def real_sh(x, L: int, order: int = 0):
@@ -186,14 +186,14 @@ def real_sh(x, L: int, order: int = 0):
     n, nb = X.shape[0], n_harmonics(L)
     Y = np.empty((n, nb))
     G = np.empty((n, nb, 3)) if order >= 1 else None
-    H = np.empty((n, nb, 3, 3)) if order == 2 else None
-    for j, F, dF, HF in _iterate(X, L, order):
+    D2 = np.empty((n, nb, 3, 3)) if order == 2 else None
+    for j, F, dF, D2F in _iterate(X, L, order):
         Y[:, j] = F
         if order >= 1:
             G[:, j] = dF
         if order == 2:
-            H[:, j] = HF
-    return Y if order == 0 else ((Y, G) if order == 1 else (Y, G, H))
+            D2[:, j] = D2F
+    return Y if order == 0 else ((Y, G) if order == 1 else (Y, G, D2))
 
 
 class HarmonicField:
@@ -271,10 +271,10 @@ def evaluate_expansions(x, C, order: int = 0, chunk: int = 8192):
     n, q = X.shape[0], C.shape[1]
     V = np.zeros((n, q))
     G = np.zeros((n, q, 3)) if order >= 1 else None
-    H = np.zeros((n, q, 3, 3)) if order == 2 else None
+    D2 = np.zeros((n, q, 3, 3)) if order == 2 else None
     for lo in range(0, n, chunk):
         sl = slice(lo, min(lo + chunk, n))
-        for j, F, dF, HF in _iterate(X[sl], L, order):
+        for j, F, dF, D2F in _iterate(X[sl], L, order):
             c = C[j]
             if not c.any():
                 continue
@@ -282,5 +282,5 @@ def evaluate_expansions(x, C, order: int = 0, chunk: int = 8192):
             if order >= 1:
                 G[sl] += dF[:, None, :] * c[:, None]
             if order == 2:
-                H[sl] += HF[:, None, :, :] * c[:, None, None]
-    return V if order == 0 else ((V, G) if order == 1 else (V, G, H))
+                D2[sl] += D2F[:, None, :, :] * c[:, None, None]
+    return V if order == 0 else ((V, G) if order == 1 else (V, G, D2))

@@ -2,7 +2,7 @@
 
 Mode ``i`` is a :class:`~sns_np.fields.NeuralField` ``g_i`` minimising (paper Eq. 27)
 
-    L = Q(h) + lambda_ortho (<h, phi_0>^2 + sum_{j<i} <h, phi_j>^2) + lambda_reg (||h|| - 1)^2
+    loss = Q(h) + lambda_ortho (<h, phi_0>^2 + sum_{j<i} <h, phi_j>^2) + lambda_reg (||h|| - 1)^2
 
 over points uniform in surface area (:func:`~sns_np.sampling.rejection_sample`), where
 ``phi_0 = 1 / sqrt(area)`` is the unit-norm constant and ``phi_j`` the modes already found,

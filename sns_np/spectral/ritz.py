@@ -4,12 +4,12 @@ The trial space is ``V_L = span{Y_lm o S^-1 : l <= L}``: fields on the surface w
 ``S(p)`` are spherical harmonics of ``p`` (the field convention ``h(S(p)) = g(p)`` of DESIGN.md).
 The Galerkin matrices of the variational problem ``min Q(h)`` (paper Eq. 20)
 
-    K_jk = integral over S of grad_S Y_j . grad_S Y_k dA
+    A_jk = integral over S of grad_S Y_j . grad_S Y_k dA
          = integral over S^2 of (R^T grad Y_j)^T I^-1 (R^T grad Y_k) sqrt(det I) dsigma,
     M_jk = integral over S of Y_j Y_k dA = integral over S^2 of Y_j Y_k sqrt(det I) dsigma,
 
 are assembled with the product Gauss rule of :mod:`sns_np.quadrature`, and the generalized
-symmetric eigenproblem ``K c = lambda M c`` is solved with :func:`scipy.linalg.eigh`. By the
+symmetric eigenproblem ``A c = lambda M c`` is solved with :func:`scipy.linalg.eigh`. By the
 min-max principle the Ritz values are upper bounds of the exact eigenvalues that decrease
 monotonically in ``L``; for a smooth (analytic) map they converge faster than any power of
 ``L``. On the unit sphere the basis contains the exact eigenfunctions, so ``L >= 3`` gives
@@ -83,15 +83,17 @@ def assemble(surface, L: int, n_theta: int | None = None, chunk: int = CHUNK):
 
     Returns
     -------
-    K, M : ((L+1)^2, (L+1)^2) float arrays, symmetric; M positive definite
+    A, M : ((L+1)^2, (L+1)^2) float arrays, symmetric: the stiffness (Dirichlet energy)
+        matrix ``A`` (``K`` is kept for Gaussian curvature) and the mass matrix ``M``, positive
+        definite
     area : float, ``M[0, 0] * 4 pi`` (the quadrature area)
     n_points : int, quadrature nodes used
 
     Examples
     --------
     >>> from sns_np.shapes import Sphere
-    >>> K, M, area, _ = assemble(Sphere(), 2)
-    >>> bool(np.allclose(M, np.eye(9))), bool(np.allclose(np.diag(K), [0, 2, 2, 2, 6, 6, 6, 6, 6]))
+    >>> A, M, area, _ = assemble(Sphere(), 2)
+    >>> bool(np.allclose(M, np.eye(9))), bool(np.allclose(np.diag(A), [0, 2, 2, 2, 6, 6, 6, 6, 6]))
     (True, True)
     """
     L = check_positive_int(L, "L")
@@ -104,7 +106,7 @@ def assemble(surface, L: int, n_theta: int | None = None, chunk: int = CHUNK):
     b = Iinv[:, 1, 0] / a
     c = np.sqrt(np.maximum(Iinv[:, 1, 1] - b * b, 0.0))
     nb = n_harmonics(L)
-    K = np.zeros((nb, nb))
+    A = np.zeros((nb, nb))
     M = np.zeros((nb, nb))
     for lo in range(0, p.shape[0], chunk):
         sl = slice(lo, min(lo + chunk, p.shape[0]))
@@ -114,15 +116,15 @@ def assemble(surface, L: int, n_theta: int | None = None, chunk: int = CHUNK):
         Z1 = c[sl, None] * T[:, :, 1]
         w = W[sl, None]
         M += Y.T @ (w * Y)
-        K += Z0.T @ (w * Z0) + Z1.T @ (w * Z1)
-    K = 0.5 * (K + K.T)
+        A += Z0.T @ (w * Z0) + Z1.T @ (w * Z1)
+    A = 0.5 * (A + A.T)
     M = 0.5 * (M + M.T)
-    return K, M, float(W.sum()), int(p.shape[0])
+    return A, M, float(W.sum()), int(p.shape[0])
 
 
-def _solve(K, M, L, k):
+def _solve(A, M, L, k):
     nb = n_harmonics(L)
-    lam, C = scipy.linalg.eigh(K[:nb, :nb], M[:nb, :nb], subset_by_index=[0, k])
+    lam, C = scipy.linalg.eigh(A[:nb, :nb], M[:nb, :nb], subset_by_index=[0, k])
     return lam, C
 
 
@@ -190,11 +192,11 @@ def ritz_eigenmodes(surface, k: int, *, L: int | None = None, tol: float = 1e-6,
     history = []
     while True:
         Lc = degrees[-1]
-        K, M, area, n_points = assemble(surface, Lc, n_theta)
-        lam, C = _solve(K, M, Lc, k)
+        A, M, area, n_points = assemble(surface, Lc, n_theta)
+        lam, C = _solve(A, M, Lc, k)
         Lp = Lc - 2
         if Lp >= 1 and n_harmonics(Lp) - 1 >= k:
-            lam_prev = _solve(K, M, Lp, k)[0]
+            lam_prev = _solve(A, M, Lp, k)[0]
             indicator = _relative_change(lam[1:], lam_prev[1:])
         else:
             lam_prev, indicator = None, math.nan
