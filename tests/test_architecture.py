@@ -41,6 +41,9 @@ FORBIDDEN = [
     ("*", "cli"),             # the command line sits on top
 ]
 
+#: units that only the listed units may import (batch sits on top, under the command line)
+ONLY_FROM = {"batch": {"cli"}}
+
 
 def module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT.parent).with_suffix("").parts)
@@ -175,6 +178,12 @@ def test_forbidden_direction(importer, imported):
     bad = {k: v for k, v in edges().items()
            if k[1] == imported and (importer == "*" or k[0] == importer)}
     assert bad == {}, f"{importer} must not import {imported}: {bad}"
+
+
+@pytest.mark.parametrize("imported", sorted(ONLY_FROM))
+def test_only_the_top_imports_the_top(imported):
+    bad = {k: v for k, v in edges().items() if k[1] == imported and k[0] not in ONLY_FROM[imported]}
+    assert bad == {}, f"only {sorted(ONLY_FROM[imported])} may import {imported}: {bad}"
 
 
 def test_no_private_name_crosses_a_subpackage():
