@@ -47,47 +47,76 @@ def _positive_float(text):
     return v
 
 
+#: the fitting options on the command line (``fit``, ``demo``, ``batch fit``), in help order
+FIT_FLAGS = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
+             "normal_weight", "input_scale", "dtype", "seed")
+
+#: metavars of options whose unit the flag should show
+_METAVARS = {"time_budget": "SECONDS"}
+
+
+def _option_type(name, check):
+    """An argparse type for option ``name``: parse the text, then apply the option's own
+    check, so that the command line refuses what the library refuses, with its message."""
+    what = "an integer" if check.parse is int else "a number"
+
+    def parse(text):
+        try:
+            value = check.parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        try:
+            check(value, name)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+    parse.__name__ = check.parse.__name__      # what argparse names in its own messages
+    return parse
+
+
+def _add_options(group, options, names, flags=None):
+    """One command-line option per field ``names`` of an options dataclass
+    (:mod:`sns_np.options`): the flag ``--<name>`` (or ``flags[name]``), the field's check
+    and its help with the dataclass's default. Options left out stay None: the library then
+    applies its default, so the command line never writes one down."""
+    from .options import Choice
+    flags = flags or {}
+    for name in names:
+        f = options.field(name)
+        check = f.metadata["check"]
+        text = f.metadata["help"] + ("" if f.default is None else f" (default: {f.default})")
+        flag = flags.get(name, "--" + name.replace("_", "-"))
+        kwargs = {"dest": name, "help": text.replace("%", "%%")}
+        if isinstance(check, Choice):
+            kwargs["choices"] = check.values
+        else:
+            kwargs["type"] = _option_type(name, check)
+            kwargs["metavar"] = _METAVARS.get(name, flag.lstrip("-").replace("-", "_").upper())
+        group.add_argument(flag, **kwargs)
+
+
 def _add_fit_options(p):
-    g = p.add_argument_group("fitting options (defaults: docs/fitting.md)")
-    g.add_argument("--steps", type=_positive_int,
-                   help="step budget (default: as many as fit the time budget)")
-    g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
-                   help="seconds of fitting (default: chosen from the mesh's detail, "
-                        "240 s in all for a smooth mesh, 540 s for a detailed one)")
-    g.add_argument("--tol", type=_positive_float,
-                   help="stop when the running RMS position error (relative to the "
-                        "normalised size) is below this")
-    g.add_argument("--width", type=_positive_int, help="network width (default 256)")
-    g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
-    g.add_argument("--batch", type=_positive_int,
-                   help="samples per step (default: chosen from the mesh's detail, 2048 to "
-                        "512)")
-    g.add_argument("--lr", type=_positive_float,
-                   help="peak learning rate (default: chosen from the mesh's detail, 1e-4 "
-                        "to 4e-3)")
-    g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
-    g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
-    g.add_argument("--input-scale", type=_positive_float,
-                   help="scale of the first layer's initial weights (default: chosen from "
-                        "the mesh's detail, 4 or 40; docs/fitting.md)")
-    g.add_argument("--smooth", choices=["phong", "none"],
-                   help="position targets on the Phong-tessellated mesh (default) or on its "
-                        "flat triangles")
-    g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
-    g.add_argument("--seed", type=int, help="random seed (default 0)")
+    from .options import MESH_SMOOTHING, FitOptions
+    g = p.add_argument_group("fitting options (sns_np.surface.FitOptions; docs/fitting.md)")
+    _add_options(g, FitOptions, FIT_FLAGS)
+    g.add_argument("--smooth", choices=MESH_SMOOTHING,
+                   help=f"position targets on the Phong-tessellated mesh or on its flat "
+                        f"triangles (default: {MESH_SMOOTHING[0]})")
 
 
-def _add_flow_options(p, points_help):
-    """The options heat and mcf share: time, snapshots, sampling, refits, output."""
+def _options_from_args(args, names):
+    """The options given on the command line (those left out are not passed)."""
+    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
+
+
+def _add_flow_options(p, options):
+    """The options heat and mcf share: time, snapshots, sampling, refits, output; ``options``
+    is the flow's options dataclass (HeatOptions, MCFOptions)."""
     p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
     p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
     p.add_argument("--snapshots", type=_positive_int, default=10,
                    help="number of snapshots after t = 0 (10)")
-    p.add_argument("--points", type=_positive_int,
-                   help=f"{points_help} (default: at the stability limit)")
-    p.add_argument("--refit-steps", type=int,
-                   help="optimiser steps per refit (100; a time step has one refit with "
-                        "euler, two with heun or midpoint)")
+    _add_options(p, options, _FLOW_FLAGS, flags={"n_points": "--points"})
     p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
     p.add_argument("--scheme", choices=["heun", "midpoint", "euler"], default="heun",
                    help="time scheme: heun or midpoint (second order, two refits per step) or "
@@ -99,13 +128,16 @@ def _add_flow_options(p, points_help):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+#: the flow options that heat and mcf both put on the command line
+_FLOW_FLAGS = ("n_points", "refit_steps")
+
+
 def _fit_kwargs(args):
-    keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-            "normal_weight", "input_scale", "dtype", "seed", "smooth")
-    return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
+    return _options_from_args(args, FIT_FLAGS + ("smooth",))
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .options import HeatOptions, MCFOptions
     parser = _Parser(
         prog="sns-np",
         description="Spherical Neural Surfaces: fit genus-0 meshes with a hand-differentiated "
@@ -213,8 +245,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
                         "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
     p.add_argument("--method", choices=["network", "spectral"], default="network")
-    p.add_argument("-k", type=_positive_int, help="eigenmodes of the spectral scheme (50)")
-    _add_flow_options(p, "sample points of the network scheme")
+    _add_options(p, HeatOptions, ("k",), flags={"k": "-k"})
+    _add_flow_options(p, HeatOptions)
     p.set_defaults(func=_cmd_heat)
 
     p = sub.add_parser("mcf", help="mean curvature flow of a model",
@@ -222,8 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "X_t = -2 H n and write PLY snapshots (normal, H, K per vertex) and the "
                        "snapshot models into a new output folder, written atomically.")
     p.add_argument("model", help="fitted model (.npz)")
-    p.add_argument("--lr", type=_positive_float, help="refit learning rate (1e-4)")
-    _add_flow_options(p, "sample points per step")
+    _add_options(p, MCFOptions, ("lr",))
+    _add_flow_options(p, MCFOptions)
     p.set_defaults(func=_cmd_mcf)
 
     p = sub.add_parser("batch", help="fit many meshes, or their spectra, on a Dask cluster",
@@ -586,14 +618,7 @@ def _cmd_heat(args):
     S = _load_model(args.model)
     field = _parse_field(args.field, S)
     dt = args.dt or args.t_end / 100
-    opts = {}
-    if args.method == "network":
-        if args.points:
-            opts["n_points"] = args.points
-        if args.refit_steps is not None:
-            opts["refit_steps"] = args.refit_steps
-    elif args.k:
-        opts["k"] = args.k
+    opts = _options_from_args(args, _FLOW_FLAGS if args.method == "network" else ("k",))
     _run_flow(lambda: heat_flow(S, field, args.t_end, dt, method=args.method,
                                 scheme=args.scheme, n_snapshots=args.snapshots,
                                 stability="ignore" if args.force else "raise", rng=args.seed,
@@ -607,8 +632,7 @@ def _cmd_mcf(args):
     out = _check_output_folder(args.output, args.level)
     S = _load_model(args.model)
     dt = args.dt or args.t_end / 100
-    opts = {k: v for k, v in (("n_points", args.points), ("refit_steps", args.refit_steps),
-                              ("lr", args.lr)) if v is not None}
+    opts = _options_from_args(args, _FLOW_FLAGS + ("lr",))
     res = _run_flow(lambda: mean_curvature_flow(
         S, args.t_end, dt, scheme=args.scheme, n_snapshots=args.snapshots,
         stability="ignore" if args.force else "raise", rng=args.seed,
