@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 
 from ._version import __version__
+from .options import given_arguments
 
 
 class _Parser(argparse.ArgumentParser):
@@ -51,72 +52,24 @@ def _positive_float(text):
 FIT_FLAGS = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
              "normal_weight", "input_scale", "dtype", "seed")
 
-#: metavars of options whose unit the flag should show
-_METAVARS = {"time_budget": "SECONDS"}
-
-
-def _option_type(name, check):
-    """An argparse type for option ``name``: parse the text, then apply the option's own
-    check, so that the command line refuses what the library refuses, with its message."""
-    what = "an integer" if check.parse is int else "a number"
-
-    def parse(text):
-        try:
-            value = check.parse(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
-        try:
-            check(value, name)
-        except ValueError as exc:
-            raise argparse.ArgumentTypeError(str(exc)) from None
-        return value
-    parse.__name__ = check.parse.__name__      # what argparse names in its own messages
-    return parse
-
-
-def _add_options(group, options, names, flags=None):
-    """One command-line option per field ``names`` of an options dataclass
-    (:mod:`sns_np.options`): the flag ``--<name>`` (or ``flags[name]``), the field's check
-    and its help with the dataclass's default. Options left out stay None: the library then
-    applies its default, so the command line never writes one down."""
-    from .options import Choice
-    flags = flags or {}
-    for name in names:
-        f = options.field(name)
-        check = f.metadata["check"]
-        text = f.metadata["help"] + ("" if f.default is None else f" (default: {f.default})")
-        flag = flags.get(name, "--" + name.replace("_", "-"))
-        kwargs = {"dest": name, "help": text.replace("%", "%%")}
-        if isinstance(check, Choice):
-            kwargs["choices"] = check.values
-        else:
-            kwargs["type"] = _option_type(name, check)
-            kwargs["metavar"] = _METAVARS.get(name, flag.lstrip("-").replace("-", "_").upper())
-        group.add_argument(flag, **kwargs)
-
-
 def _add_fit_options(p):
-    from .options import MESH_SMOOTHING, FitOptions
+    from .options import MESH_SMOOTHING, FitOptions, add_arguments
     g = p.add_argument_group("fitting options (sns_np.surface.FitOptions; docs/fitting.md)")
-    _add_options(g, FitOptions, FIT_FLAGS)
+    add_arguments(g, FitOptions, FIT_FLAGS)
     g.add_argument("--smooth", choices=MESH_SMOOTHING,
                    help=f"position targets on the Phong-tessellated mesh or on its flat "
                         f"triangles (default: {MESH_SMOOTHING[0]})")
 
 
-def _options_from_args(args, names):
-    """The options given on the command line (those left out are not passed)."""
-    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
-
-
 def _add_flow_options(p, options):
     """The options heat and mcf share: time, snapshots, sampling, refits, output; ``options``
     is the flow's options dataclass (HeatOptions, MCFOptions)."""
+    from .options import add_arguments
     p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
     p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
     p.add_argument("--snapshots", type=_positive_int, default=10,
                    help="number of snapshots after t = 0 (10)")
-    _add_options(p, options, _FLOW_FLAGS, flags={"n_points": "--points"})
+    add_arguments(p, options, _FLOW_FLAGS, flags={"n_points": "--points"})
     p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
     p.add_argument("--scheme", choices=["heun", "midpoint", "euler"], default="heun",
                    help="time scheme: heun or midpoint (second order, two refits per step) or "
@@ -133,11 +86,11 @@ _FLOW_FLAGS = ("n_points", "refit_steps")
 
 
 def _fit_kwargs(args):
-    return _options_from_args(args, FIT_FLAGS + ("smooth",))
+    return given_arguments(args, FIT_FLAGS + ("smooth",))
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .options import HeatOptions, MCFOptions
+    from .options import HeatOptions, MCFOptions, add_arguments
     parser = _Parser(
         prog="sns-np",
         description="Spherical Neural Surfaces: fit genus-0 meshes with a hand-differentiated "
@@ -245,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
                         "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
     p.add_argument("--method", choices=["network", "spectral"], default="network")
-    _add_options(p, HeatOptions, ("k",), flags={"k": "-k"})
+    add_arguments(p, HeatOptions, ("k",), flags={"k": "-k"})
     _add_flow_options(p, HeatOptions)
     p.set_defaults(func=_cmd_heat)
 
@@ -254,7 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "X_t = -2 H n and write PLY snapshots (normal, H, K per vertex) and the "
                        "snapshot models into a new output folder, written atomically.")
     p.add_argument("model", help="fitted model (.npz)")
-    _add_options(p, MCFOptions, ("lr",))
+    add_arguments(p, MCFOptions, ("lr",))
     _add_flow_options(p, MCFOptions)
     p.set_defaults(func=_cmd_mcf)
 
@@ -618,7 +571,7 @@ def _cmd_heat(args):
     S = _load_model(args.model)
     field = _parse_field(args.field, S)
     dt = args.dt or args.t_end / 100
-    opts = _options_from_args(args, _FLOW_FLAGS if args.method == "network" else ("k",))
+    opts = given_arguments(args, _FLOW_FLAGS if args.method == "network" else ("k",))
     _run_flow(lambda: heat_flow(S, field, args.t_end, dt, method=args.method,
                                 scheme=args.scheme, n_snapshots=args.snapshots,
                                 stability="ignore" if args.force else "raise", rng=args.seed,
@@ -632,7 +585,7 @@ def _cmd_mcf(args):
     out = _check_output_folder(args.output, args.level)
     S = _load_model(args.model)
     dt = args.dt or args.t_end / 100
-    opts = _options_from_args(args, _FLOW_FLAGS + ("lr",))
+    opts = given_arguments(args, _FLOW_FLAGS + ("lr",))
     res = _run_flow(lambda: mean_curvature_flow(
         S, args.t_end, dt, scheme=args.scheme, n_snapshots=args.snapshots,
         stability="ignore" if args.force else "raise", rng=args.seed,

@@ -27,6 +27,7 @@ Examples
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import numbers
 from collections.abc import Mapping
@@ -34,8 +35,8 @@ from dataclasses import dataclass
 
 from ._validation import check_choice, check_positive_float, check_positive_int
 
-__all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "AUTO",
-           "DETAIL_RANGE", "MESH_SMOOTHING"]
+__all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
+           "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -373,3 +374,80 @@ class MCFOptions(Options):
     growth: float = option(1.5, "divergence when the area exceeds this times the initial "
                            "area", Real())
     n_eval: int = option(256, "held-out points per refit report", Int(1))
+
+
+# ------------------------------------------------------------------------------ command lines
+
+#: metavars of options whose unit the flag should show
+METAVARS = {"time_budget": "SECONDS"}
+
+
+def _argument_type(name, check):
+    """An argparse type for option ``name``: parse the text, then apply the option's own
+    check, so that a command line refuses what the library refuses, with its message."""
+    what = "an integer" if check.parse is int else "a number"
+
+    def parse(text):
+        try:
+            value = check.parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        try:
+            check(value, name)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+    parse.__name__ = check.parse.__name__      # what argparse names in its own messages
+    return parse
+
+
+def add_arguments(parser, options, names, flags=None):
+    """Add one command-line option per field ``names`` of an options dataclass.
+
+    The flag is ``--<name>`` with dashes (or ``flags[name]``); a value is parsed and checked
+    as the option's own check does (same message); the help is the field's, with the
+    dataclass's default. An option left out stays ``None``, so the library applies its
+    default: the command line never writes one down. ``sns-np`` and the examples use it.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+    options : an options dataclass (FitOptions, HeatOptions, MCFOptions)
+    names : sequence of str, the fields to offer, in help order
+    flags : dict, optional, ``{name: flag}`` for flags that differ from the name
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="fit")
+    >>> add_arguments(p, FitOptions, ["width", "time_budget", "optimizer"])
+    >>> args = p.parse_args(["--width", "64"])
+    >>> args.width, args.time_budget, given_arguments(args, ["width", "time_budget"])
+    (64, None, {'width': 64})
+    >>> "network width (default: 256)" in " ".join(p.format_help().split())
+    True
+    """
+    flags = flags or {}
+    for name in names:
+        f = options.field(name)
+        check = f.metadata["check"]
+        text = f.metadata["help"] + ("" if f.default is None else f" (default: {f.default})")
+        flag = flags.get(name, "--" + name.replace("_", "-"))
+        kwargs = {"dest": name, "help": text.replace("%", "%%")}
+        if isinstance(check, Choice):
+            kwargs["choices"] = check.values
+        else:
+            kwargs["type"] = _argument_type(name, check)
+            kwargs["metavar"] = METAVARS.get(name, flag.lstrip("-").replace("-", "_").upper())
+        parser.add_argument(flag, **kwargs)
+
+
+def given_arguments(args, names):
+    """The options among ``names`` given on a parsed command line, as keyword arguments
+    (those left out are not passed, so they keep the library's defaults).
+
+    Examples
+    --------
+    >>> given_arguments(argparse.Namespace(steps=5, lr=None), ["steps", "lr", "batch"])
+    {'steps': 5}
+    """
+    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}

@@ -60,6 +60,7 @@ from ..sampling import fibonacci_sphere, surface_sample
 from ._common import (
     DEFAULT_SCHEME,
     SCHEMES,
+    STABILITY_MODES,
     check_scheme,
     check_stability,
     check_times,
@@ -311,7 +312,7 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *,
     o = HeatOptions.from_kwargs(**options)
     if method == "spectral":
         return _spectral(surface, field, T, o)
-    check_choice(stability, "stability", ("warn", "raise", "ignore"))
+    check_choice(stability, "stability", STABILITY_MODES)
     return _network(surface, field, T, dt, o, stability, as_generator(rng), progress, scheme)
 
 

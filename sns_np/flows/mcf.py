@@ -60,6 +60,7 @@ from ..surface import SphericalNeuralSurface, fit_sampler
 from ._common import (
     DEFAULT_SCHEME,
     SCHEMES,
+    STABILITY_MODES,
     StabilityWarning,
     check_scheme,
     check_stability,
@@ -268,7 +269,7 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
                         f"SphericalNeuralSurface.fit_shape")
     scheme = check_scheme(scheme)
     t_end, dt, T = check_times(t_end, dt, times, n_snapshots)
-    check_choice(stability, "stability", ("warn", "raise", "ignore"))
+    check_choice(stability, "stability", STABILITY_MODES)
     o = MCFOptions.from_kwargs(**options)
     # o is checked; the conversions keep the types the flow has always used
     refit_steps, lr, growth, n_eval = int(o.refit_steps), float(o.lr), float(o.growth), \
