@@ -64,14 +64,14 @@ def _add_fit_options(p):
 def _add_flow_options(p, options):
     """The options heat and mcf share: time, snapshots, sampling, refits, output; ``options``
     is the flow's options dataclass (HeatOptions, MCFOptions)."""
-    from .options import add_arguments
+    from .options import DEFAULT_SCHEME, DEFAULT_SNAPSHOTS, SCHEMES, add_arguments
     p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
     p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
-    p.add_argument("--snapshots", type=_positive_int, default=10,
-                   help="number of snapshots after t = 0 (10)")
+    p.add_argument("--snapshots", type=_positive_int, default=DEFAULT_SNAPSHOTS,
+                   help="number of snapshots after t = 0 (%(default)s)")
     add_arguments(p, options, _FLOW_FLAGS, flags={"n_points": "--points"})
     p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
-    p.add_argument("--scheme", choices=["heun", "midpoint", "euler"], default="heun",
+    p.add_argument("--scheme", choices=list(SCHEMES), default=DEFAULT_SCHEME,
                    help="time scheme: heun or midpoint (second order, two refits per step) or "
                         "euler (the paper's first-order step, one refit); the spectral heat "
                         "method is exact in time and ignores it (default: %(default)s)")
@@ -90,7 +90,13 @@ def _fit_kwargs(args):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from .options import HeatOptions, MCFOptions, add_arguments
+    from .options import (
+        CHECKPOINT_SECONDS,
+        CHECKPOINT_STEPS,
+        HeatOptions,
+        MCFOptions,
+        add_arguments,
+    )
     parser = _Parser(
         prog="sns-np",
         description="Spherical Neural Surfaces: fit genus-0 meshes with a hand-differentiated "
@@ -127,9 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="output model (.npz)")
     p.add_argument("--checkpoint", help="checkpoint file (.npz; default OUTPUT.ckpt.npz)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint")
-    p.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
-                   help="write the checkpoint at least this often (default: %(default)g s; "
-                        "also every 500 steps)")
+    p.add_argument("--checkpoint-every", type=_positive_float, default=CHECKPOINT_SECONDS,
+                   metavar="SECONDS",
+                   help=f"write the checkpoint at least this often (default: %(default)g s; "
+                        f"also every {CHECKPOINT_STEPS} steps)")
     p.add_argument("--keep-checkpoint", action="store_true",
                    help="keep the checkpoint after a successful fit (default: remove it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -233,7 +240,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--resume", action="store_true",
                    help="accepted for symmetry with 'sns-np fit': a batch always resumes "
                         "from the checkpoints it finds")
-    b.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
+    b.add_argument("--checkpoint-every", type=_positive_float, default=CHECKPOINT_SECONDS,
+                   metavar="SECONDS",
                    help="write each fit's checkpoint at least this often (default: %(default)g"
                         " s): a killed worker loses at most that much of its fit")
     b.add_argument("--keep-checkpoint", action="store_true",

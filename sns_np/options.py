@@ -36,7 +36,9 @@ from dataclasses import dataclass
 from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
-           "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING"]
+           "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "CHECKPOINT_SECONDS", "SCHEMES",
+           "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -196,6 +198,11 @@ AUTO = {
                  "batch": 512},
 }
 
+#: checkpoint cadence of a fit (``checkpoint_every`` steps, ``checkpoint_seconds`` seconds,
+#: whichever comes first): a crash loses at most about a minute
+CHECKPOINT_STEPS = 500
+CHECKPOINT_SECONDS = 60.0
+
 #: position targets of a mesh fit (``fit_mesh(smooth=...)``), the default first: the
 #: Phong-tessellated mesh or its flat triangles
 MESH_SMOOTHING = ("phong", "none")
@@ -292,6 +299,15 @@ class FitOptions(Options):
 
 
 # ------------------------------------------------------------------------------ flows
+
+#: explicit time schemes of the network flows: name -> ``(a, b)`` of the two-stage
+#: Runge-Kutta step ``y* = y + a h F(y)``, ``y+ = y + h ((1 - b) F(y) + b F(y*))``
+#: (``None``: one stage, forward Euler, the paper's). ``a b = 1/2`` makes both second order.
+SCHEMES = {"heun": (1.0, 0.5), "midpoint": (0.5, 1.0), "euler": None}
+DEFAULT_SCHEME = "heun"
+
+#: snapshots after t = 0 of a flow given no snapshot times (``n_snapshots=``)
+DEFAULT_SNAPSHOTS = 10
 
 @dataclass(frozen=True)
 class HeatOptions(Options):

@@ -10,6 +10,7 @@ import socket
 import time
 from pathlib import Path
 
+from ..options import CHECKPOINT_SECONDS
 from .cluster import connect, dashboard_address, limit_threads, run_tasks, say, thread_counts
 from .table import Table
 
@@ -160,7 +161,7 @@ def _check_names(meshes):
 
 
 def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, threads_per_fit=1,
-             checkpoint_dir=None, checkpoint_seconds=60.0, keep_checkpoint=False,
+             checkpoint_dir=None, checkpoint_seconds=CHECKPOINT_SECONDS, keep_checkpoint=False,
              progress=True, **fit_options):
     """Fit every mesh on a Dask cluster; one ``NAME.npz`` per mesh and a summary in out_dir.
 

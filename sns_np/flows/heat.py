@@ -54,7 +54,7 @@ from ..geometry import (
 )
 from ..geometry._common import chart_jets, degenerate_mask, raise_degenerate
 from ..nn.optim import Adam
-from ..options import HeatOptions
+from ..options import DEFAULT_SNAPSHOTS, HeatOptions
 from ..protocol import chunk_slices, field_jet
 from ..sampling import fibonacci_sphere, surface_sample
 from ._common import (
@@ -250,7 +250,7 @@ class ModalField:
 # ------------------------------------------------------------------------------ public API
 
 def heat_flow(surface, field, t_end, dt, method: str = "network", *,
-              scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = 10,
+              scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = DEFAULT_SNAPSHOTS,
               stability: str = "warn", rng=None, progress: bool = False,
               **options) -> HeatFlowResult:
     """Evolve a scalar field by the heat equation ``f_t = Delta_S f`` on a surface map.

@@ -55,7 +55,7 @@ from .._validation import as_generator, check_choice
 from .._validation import check_positive_int as _pos_int
 from ..errors import DegenerateMapError, DivergenceError
 from ..geometry import area_element, differential_quantities
-from ..options import MCFOptions
+from ..options import DEFAULT_SNAPSHOTS, MCFOptions
 from ..surface import SphericalNeuralSurface, fit_sampler
 from ._common import (
     DEFAULT_SCHEME,
@@ -205,7 +205,7 @@ def _area(S, n_quad=4096):
 
 
 def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, times=None,
-                        n_snapshots: int = 10, stability: str = "warn",
+                        n_snapshots: int = DEFAULT_SNAPSHOTS, stability: str = "warn",
                         mesh_level: int | None = None, rng=None, progress: bool = False,
                         **options) -> MeanCurvatureFlowResult:
     """Evolve a fitted surface by mean curvature flow ``X_t = Delta_S X = -2 H n``.

@@ -38,7 +38,14 @@ from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
 from ..nn.optim import Schedule, make_optimizer
-from ..options import AUTO, DETAIL_RANGE, MESH_SMOOTHING, FitOptions
+from ..options import (
+    AUTO,
+    CHECKPOINT_SECONDS,
+    CHECKPOINT_STEPS,
+    DETAIL_RANGE,
+    MESH_SMOOTHING,
+    FitOptions,
+)
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
@@ -290,7 +297,8 @@ def fit_shape(shape, **options):
 
 
 def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoint=None,
-                checkpoint_every=500, checkpoint_seconds=60.0, resume=False, progress=True,
+                checkpoint_every=CHECKPOINT_STEPS, checkpoint_seconds=CHECKPOINT_SECONDS,
+                resume=False, progress=True,
                 callback=None, history_every=50, **options):
     """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
 
@@ -307,57 +315,56 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
-        Architecture of a fresh network (default 256 x 8, the reference's).
+        Architecture of a fresh network (by default the reference's).
     steps : int, optional
         Step budget. Default: as many steps as fit in ``time_budget``, with the cosine decay
         running on the clock (over the fraction of the budget elapsed).
     batch : int
-        Fresh samples per step. Default: chosen from the target's :func:`detail`, 2048 (the
-        reference's) for a smooth target, 512 for a detailed one: in the same time, 3.3 times
-        as many steps of a quarter of the samples fit detail better (docs/fitting.md). A
-        warm start ``net`` uses the smooth end's.
+        Fresh samples per step. Default: chosen from the target's :func:`detail`, the
+        reference's for a smooth target and a quarter of it for a detailed one: in the same
+        time, 3.3 times as many steps of a quarter of the samples fit detail better
+        (docs/fitting.md). A warm start ``net`` uses the smooth end's.
     lr, lr_min, schedule, warmup, optimizer
-        Adam by default, cosine decay from ``lr`` to ``lr_min`` = 1e-5 with a linear warm-up
-        of ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
-        :func:`detail` (1e-4 and 50 for a smooth target, 4e-3 and 100 for a detailed one; a
-        warm start ``net`` uses the smooth end's). ``optimizer="rmsprop", lr=1e-4,
-        schedule="constant", normal_weight=1e-4`` reproduces the reference's settings.
+        Adam by default, cosine decay from ``lr`` to ``lr_min`` with a linear warm-up of
+        ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
+        :func:`detail` (``AUTO``; a warm start ``net`` uses the smooth end's).
+        ``optimizer="rmsprop", lr=1e-4, schedule="constant", normal_weight=1e-4`` reproduces
+        the reference's settings.
     normal_weight : float
-        Weight of the normal term (default 1.0; the reference's 1e-4 leaves the normals to
-        the position term, which on a mesh is dominated by the tangential error of the
-        spherical embedding: docs/fitting.md measures both).
+        Weight of the normal term (the reference's 1e-4 leaves the normals to the position
+        term, which on a mesh is dominated by the tangential error of the spherical
+        embedding: docs/fitting.md measures both).
     dtype : {"float32", "float64"}
-        Training precision (default float32; the result is float64).
+        Training precision (the result is float64).
     init : {"ridge", "random"}
-        "ridge" (default) sets the output layer of a fresh network by regularised least squares
-        on its initial features, so training starts from the best linear read-out instead of a
-        point (see docs/fitting.md for the measured effect).
+        "ridge" sets the output layer of a fresh network by regularised least squares on its
+        initial features, so training starts from the best linear read-out instead of a point
+        (see docs/fitting.md for the measured effect).
     input_scale : float
-        First-layer scale of a fresh network (``W0`` std ``input_scale / sqrt(3)``; the
-        network's own default is 2). Default: chosen from the target's :func:`detail`, 4 for
-        a smooth target (a larger scale makes the curvature of a coarse mesh of a smooth shape
-        follow its facets) and 40 for a detailed one (features that vary fast enough for
-        ears, horns and faces), interpolated in between (docs/fitting.md).
+        First-layer scale of a fresh network (``W0`` std ``input_scale / sqrt(3)``). Default:
+        chosen from the target's :func:`detail`, small for a smooth target (a larger scale
+        makes the curvature of a coarse mesh of a smooth shape follow its facets) and ten
+        times larger for a detailed one (features that vary fast enough for ears, horns and
+        faces), interpolated in between (docs/fitting.md).
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step). Default when ``steps`` is not given either:
-        chosen from the target's detail, 240 s (smooth) to 540 s (detailed) in all, less the
-        ``elapsed_before`` seconds already spent (the embedding). A ``steps`` that this budget
-        cannot reach is refused before the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
+        chosen from the target's detail, in all, less the ``elapsed_before`` seconds already
+        spent (the embedding). A ``steps`` that this budget cannot reach is refused before
+        the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
     tangent_weight : float
-        Weight of the tangential part of the position error (default 1: the plain squared
-        distance); smaller values let points slide along the target (docs/fitting.md).
+        Weight of the tangential part of the position error (1: the plain squared distance);
+        smaller values let points slide along the target (docs/fitting.md).
     readout_every : int
-        Refit the output layer every this many steps (default 0: never) by
-        ``readout="gn"`` (Levenberg-Marquardt on the full position + normal loss) or
-        ``"ridge"`` (least squares on the positions only).
+        Refit the output layer every this many steps (0: never) by ``readout="gn"``
+        (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
+        squares on the positions only).
     tol : float, optional
         Stop when the running RMS position error, relative to the normalised size (the
         surface has area 4 pi), falls below ``tol``.
     n_eval : int
-        Held-out sphere points for the report (default 20,000; fixed seed, not used in
-        training).
+        Held-out sphere points for the report (fixed seed, not used in training).
     seed : int or Generator
-        Seed of initialisation and sampling (default 0).
+        Seed of initialisation and sampling.
     checkpoint : path, optional
         .npz file written atomically every ``checkpoint_every`` steps or ``checkpoint_seconds``
         seconds, whichever comes first, on interruption and at the end (the file is kept: the
@@ -367,7 +374,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         checkpoint is refused (:class:`~sns_np._atomic.OutputBusyError`), and temporary files
         that a killed fit left beside the checkpoint are removed.
     checkpoint_every, checkpoint_seconds : int, float
-        Checkpoint cadence (500 steps, 60 s): a crash loses at most about a minute.
+        Checkpoint cadence (``CHECKPOINT_STEPS``, ``CHECKPOINT_SECONDS``): a crash loses at
+        most about a minute.
     progress : bool
         Show a progress line on stderr.
     callback : callable ``callback(step, info) -> bool``, optional
@@ -707,8 +715,9 @@ _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resum
 def _check_early(options):
     """Refuse unknown or contradictory options before any work (embedding, fitting) starts."""
     o, rest = FitOptions.split(options, extra=_PASSED)
-    _check_checkpoint_options(rest.get("checkpoint"), rest.get("checkpoint_every", 500),
-                              rest.get("checkpoint_seconds", 60.0))
+    _check_checkpoint_options(rest.get("checkpoint"),
+                              rest.get("checkpoint_every", CHECKPOINT_STEPS),
+                              rest.get("checkpoint_seconds", CHECKPOINT_SECONDS))
     if o.steps is not None and o.time_budget is not None and rest.get("net") is None:
         per_step = _probe_step_time(o)
         if o.steps * per_step > 2.0 * o.time_budget:
