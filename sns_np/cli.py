@@ -93,6 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     from .options import (
         CHECKPOINT_SECONDS,
         CHECKPOINT_STEPS,
+        HEAT_METHODS,
         HeatOptions,
         MCFOptions,
         add_arguments,
@@ -204,7 +205,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--field", required=True,
                    help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
                         "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
-    p.add_argument("--method", choices=["network", "spectral"], default="network")
+    p.add_argument("--method", choices=HEAT_METHODS, default=HEAT_METHODS[0],
+                   help="explicit steps of a network, or exact in time through eigenmodes "
+                        "(default: %(default)s)")
     add_arguments(p, HeatOptions, ("k",), flags={"k": "-k"})
     _add_flow_options(p, HeatOptions)
     p.set_defaults(func=_cmd_heat)

@@ -38,7 +38,7 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES",
-           "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS"]
+           "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -305,6 +305,10 @@ class FitOptions(Options):
 #: (``None``: one stage, forward Euler, the paper's). ``a b = 1/2`` makes both second order.
 SCHEMES = {"heun": (1.0, 0.5), "midpoint": (0.5, 1.0), "euler": None}
 DEFAULT_SCHEME = "heun"
+
+#: the methods of the heat flow, default first: explicit steps of a network, or exact in time
+#: through eigenmodes
+HEAT_METHODS = ("network", "spectral")
 
 #: snapshots after t = 0 of a flow given no snapshot times (``n_snapshots=``)
 DEFAULT_SNAPSHOTS = 10

@@ -54,7 +54,7 @@ from ..geometry import (
 )
 from ..geometry._common import chart_jets, degenerate_mask, raise_degenerate
 from ..nn.optim import Adam
-from ..options import DEFAULT_SNAPSHOTS, HeatOptions
+from ..options import DEFAULT_SNAPSHOTS, HEAT_METHODS, HeatOptions
 from ..protocol import chunk_slices, field_jet
 from ..sampling import fibonacci_sphere, surface_sample
 from ._common import (
@@ -71,7 +71,7 @@ from ._common import (
 
 __all__ = ["heat_flow", "HeatFlowResult", "HeatOptions", "ModalField", "HEAT_DEFAULTS"]
 
-METHODS = ("network", "spectral")
+METHODS = HEAT_METHODS
 
 #: the default options as a dict (kept for older code: :class:`HeatOptions` holds them)
 HEAT_DEFAULTS = HeatOptions().to_dict()
@@ -249,7 +249,7 @@ class ModalField:
 
 # ------------------------------------------------------------------------------ public API
 
-def heat_flow(surface, field, t_end, dt, method: str = "network", *,
+def heat_flow(surface, field, t_end, dt, method: str = HEAT_METHODS[0], *,
               scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = DEFAULT_SNAPSHOTS,
               stability: str = "warn", rng=None, progress: bool = False,
               **options) -> HeatFlowResult:
