@@ -37,8 +37,8 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
-           "CHECKPOINT_SECONDS", "SCHEMES",
-           "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
+           "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS",
+           "HEAT_METHODS"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -106,7 +106,18 @@ def option(default, help, check, resume=False):
 
 class Options:
     """What every options dataclass shares: construction from keyword arguments, checks,
-    the resume key and the conversion to and from the metadata of model files."""
+    the resume key and the conversion to and from the metadata of model files.
+
+    Examples
+    --------
+    >>> o = MCFOptions.from_kwargs(lr=1e-3, batch=None)
+    >>> o.replace(refit_steps=5).to_dict()["refit_steps"], o.refit_steps   # frozen: a copy
+    (5, 100)
+    >>> MCFOptions.from_dict({"lr": 1e-3, "mcf_time": 0.5}) == o           # others ignored
+    True
+    >>> MCFOptions.names()[:3], MCFOptions.help("batch")
+    (('n_points', 'refit_steps', 'lr'), 'samples per refit step (default: all points)')
+    """
 
     #: the start of the message naming unknown options ({names} is filled in)
     _unknown = "unknown option(s) {names}"
