@@ -17,8 +17,9 @@ Run (from the project root; needs pip install "sns-np[distributed,plots]"):
     python examples/batch_shared_meshes.py --time-budget 180   # what docs/batch.md reports
     python examples/batch_shared_meshes.py --scheduler tcp://host:8786
 
-The fits take the library's defaults unless options are given; --time-budget shortens each
-fit (the defaults give a detailed mesh 540 s). Rerunning skips the fits already complete.
+The fits take the library's defaults (sns_np.surface.FitOptions) unless options are given;
+--time-budget shortens each fit (--help shows the automatic budget of a detailed mesh).
+Rerunning skips the fits already complete.
 SNS_NP_SMOKE=1 fits a 32 x 2 network for 50 steps (seconds) and uses K = 5.
 Output in OUT_DIR (default ./sns_np_examples_out/batch): the four models, summary.csv/.json,
 spectra_neural.csv/.json, spectra_fem.csv/.json, comparison.json and spectra.png.
