@@ -17,8 +17,9 @@ Run (from the project root; needs pip install "sns-np[distributed,plots]"):
     python examples/batch_shared_meshes.py --time-budget 180   # what docs/batch.md reports
     python examples/batch_shared_meshes.py --scheduler tcp://host:8786
 
-The fits take the library's defaults unless options are given; --time-budget shortens each
-fit (the defaults give a detailed mesh 540 s). Rerunning skips the fits already complete.
+The fits take the library's defaults (sns_np.surface.FitOptions) unless options are given;
+--time-budget shortens each fit (--help shows the automatic budget of a detailed mesh).
+Rerunning skips the fits already complete.
 SNS_NP_SMOKE=1 fits a 32 x 2 network for 50 steps (seconds) and uses K = 5.
 Output in OUT_DIR (default ./sns_np_examples_out/batch): the four models, summary.csv/.json,
 spectra_neural.csv/.json, spectra_fem.csv/.json, comparison.json and spectra.png.
@@ -32,9 +33,13 @@ from pathlib import Path
 
 from _common import SMOKE, SMOKE_FIT, clear_errors, positive_int, write_atomically
 
+from sns_np.options import FitOptions, add_arguments, given_arguments
+
 MESHES = ["spot_triangulated", "spot_quadrangulated", "max10606", "decimated_max"]
 PAIRS = [("spot_triangulated", "spot_quadrangulated"), ("max10606", "decimated_max")]
 DEFAULT_MESH_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "meshes"
+#: the fitting options this example offers (flags, help and defaults come from FitOptions)
+FIT_FLAGS = ("time_budget", "steps", "width", "depth")
 
 
 def fem_table(paths, k):
@@ -121,10 +126,7 @@ def main(argv=None):
                         help="output folder (%(default)s)")
     parser.add_argument("-k", type=positive_int, default=None,
                         help="eigenvalues per shape (default 20; 5 with SNS_NP_SMOKE=1)")
-    parser.add_argument("--time-budget", type=float, help="seconds per fit (default: auto)")
-    parser.add_argument("--steps", type=positive_int, help="steps per fit (default: auto)")
-    parser.add_argument("--width", type=positive_int, help="network width (default 256)")
-    parser.add_argument("--depth", type=positive_int, help="residual blocks (default 8)")
+    add_arguments(parser, FitOptions, FIT_FLAGS)
     parser.add_argument("--max-degree", type=positive_int, default=40,
                         help="largest harmonic degree of the Rayleigh-Ritz spectra (40)")
     parser.add_argument("--workers", type=positive_int, help="local worker processes")
@@ -140,9 +142,7 @@ def main(argv=None):
             raise ValueError(f"shared meshes not found: {', '.join(missing)} (--mesh-dir)")
         k = args.k or (5 if SMOKE else 20)
         options = dict(SMOKE_FIT) if SMOKE else {}
-        options.update({key: getattr(args, key) for key in ("time_budget", "steps", "width",
-                                                            "depth")
-                        if getattr(args, key) is not None})
+        options.update(given_arguments(args, FIT_FLAGS))
         out = Path(args.out_dir)
         out.mkdir(parents=True, exist_ok=True)
         cluster = dict(scheduler=args.scheduler, workers=args.workers)

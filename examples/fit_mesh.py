@@ -11,9 +11,9 @@ Run (from the project root):
     python examples/fit_mesh.py ../shared/data/meshes/spot_triangulated.obj
     python examples/fit_mesh.py --help
 
-The default budget is the library's: a 256 x 8 network, and a time budget chosen from the
-mesh's detail (240 s for a smooth mesh, 540 s for a detailed one; docs/fitting.md), as are the
-first layer's scale and the learning rate. --time-budget, --steps, --width and --depth trade
+The default budget is the library's (sns_np.surface.FitOptions; --help shows each default):
+a 256 x 8 network, and a time budget chosen from the mesh's detail (docs/fitting.md), as are
+the first layer's scale and the learning rate. --time-budget, --steps, --width and --depth trade
 accuracy for time.
 SNS_NP_SMOKE=1 uses a 32 x 2 network and 50 steps: seconds, and a rough surface.
 Output: OUT_DIR/<mesh name>.npz (OUT_DIR defaults to ./sns_np_examples_out).
@@ -30,11 +30,14 @@ from _common import (
     SMOKE_FIT,
     clear_errors,
     output_dir,
-    positive_int,
     read_mesh,
 )
 
-from sns_np.surface import fit_mesh
+from sns_np.options import add_arguments, given_arguments
+from sns_np.surface import FitOptions, fit_mesh
+
+#: the fitting options this example offers (flags, help and defaults come from FitOptions)
+FIT_FLAGS = ("steps", "time_budget", "width", "depth", "input_scale", "seed")
 
 
 def main(argv=None):
@@ -45,24 +48,13 @@ def main(argv=None):
                         help="closed genus-0 mesh (.obj, .off, .ply, .stl); "
                              "default: the built-in ellipsoid")
     parser.add_argument("--out-dir", default=DEFAULT_OUT_DIR, help="output folder (%(default)s)")
-    parser.add_argument("--steps", type=positive_int,
-                        help="training steps (default: as many as fit the time budget)")
-    parser.add_argument("--time-budget", type=float,
-                        help="seconds of fitting (default: chosen from the mesh's detail)")
-    parser.add_argument("--width", type=positive_int, help="network width (default 256)")
-    parser.add_argument("--depth", type=positive_int, help="residual blocks (default 8)")
-    parser.add_argument("--input-scale", type=float,
-                        help="first-layer scale of the initial network (default: chosen "
-                             "from the mesh's detail, 4 to 40)")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (%(default)s)")
+    add_arguments(parser, FitOptions, FIT_FLAGS)
     parser.add_argument("--quiet", action="store_true", help="no progress display")
     args = parser.parse_args(argv)
 
     # the library's defaults, unless smoke mode or the command line says otherwise
     budget = dict(SMOKE_FIT) if SMOKE else {}
-    budget.update({k: v for k, v in vars(args).items()
-                   if k in ("steps", "time_budget", "width", "depth", "input_scale")
-                   and v is not None})
+    budget.update(given_arguments(args, FIT_FLAGS))
 
     with clear_errors(parser):
         out_dir = output_dir(args.out_dir)
@@ -71,8 +63,7 @@ def main(argv=None):
         # fit_mesh checks the mesh, embeds it on the sphere, then trains; the source is kept
         # in the model so that compare_to_mesh.py can find the mesh again
         source = BUILTIN if args.mesh is None else str(Path(args.mesh).resolve())
-        surface, report = fit_mesh(V, F, seed=args.seed, source=source,
-                                   progress=not args.quiet, **budget)
+        surface, report = fit_mesh(V, F, source=source, progress=not args.quiet, **budget)
         print(report.summary())
         out_dir.mkdir(parents=True, exist_ok=True)
         path = surface.save(out_dir / f"{name}.npz")        # written atomically

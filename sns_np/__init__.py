@@ -17,6 +17,7 @@ spectral   Laplace-Beltrami eigenmodes
 flows      heat flow, mean curvature flow, SDF fitting
 testing    central-difference derivative checks
 quadrature deterministic sphere quadrature
+options    the options of fits and flows (FitOptions, HeatOptions, MCFOptions)
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from ._version import __version__
 
 _SUBMODULES = {
     "nn", "geometry", "shapes", "mesh", "sampling", "fields", "spectral", "flows",
-    "testing", "protocol", "errors", "surface", "cli", "quadrature", "demo",
+    "testing", "protocol", "errors", "surface", "cli", "quadrature", "demo", "options",
 }
 _ATTRS = {"SphericalNeuralSurface": "surface"}
 

@@ -14,6 +14,7 @@ import threading
 from pathlib import Path
 
 from ._version import __version__
+from .options import given_arguments
 
 
 class _Parser(argparse.ArgumentParser):
@@ -47,49 +48,30 @@ def _positive_float(text):
     return v
 
 
+#: the fitting options on the command line (``fit``, ``demo``, ``batch fit``), in help order
+FIT_FLAGS = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
+             "normal_weight", "input_scale", "dtype", "seed")
+
 def _add_fit_options(p):
-    g = p.add_argument_group("fitting options (defaults: docs/fitting.md)")
-    g.add_argument("--steps", type=_positive_int,
-                   help="step budget (default: as many as fit the time budget)")
-    g.add_argument("--time-budget", type=_positive_float, metavar="SECONDS",
-                   help="seconds of fitting (default: chosen from the mesh's detail, "
-                        "240 s in all for a smooth mesh, 540 s for a detailed one)")
-    g.add_argument("--tol", type=_positive_float,
-                   help="stop when the running RMS position error (relative to the "
-                        "normalised size) is below this")
-    g.add_argument("--width", type=_positive_int, help="network width (default 256)")
-    g.add_argument("--depth", type=_positive_int, help="residual blocks (default 8)")
-    g.add_argument("--batch", type=_positive_int,
-                   help="samples per step (default: chosen from the mesh's detail, 2048 to "
-                        "512)")
-    g.add_argument("--lr", type=_positive_float,
-                   help="peak learning rate (default: chosen from the mesh's detail, 1e-4 "
-                        "to 4e-3)")
-    g.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd"])
-    g.add_argument("--normal-weight", type=float, help="weight of the normal loss (default 1.0)")
-    g.add_argument("--input-scale", type=_positive_float,
-                   help="scale of the first layer's initial weights (default: chosen from "
-                        "the mesh's detail, 4 or 40; docs/fitting.md)")
-    g.add_argument("--smooth", choices=["phong", "none"],
-                   help="position targets on the Phong-tessellated mesh (default) or on its "
-                        "flat triangles")
-    g.add_argument("--dtype", choices=["float32", "float64"], help="training precision")
-    g.add_argument("--seed", type=int, help="random seed (default 0)")
+    from .options import MESH_SMOOTHING, FitOptions, add_arguments
+    g = p.add_argument_group("fitting options (sns_np.surface.FitOptions; docs/fitting.md)")
+    add_arguments(g, FitOptions, FIT_FLAGS)
+    g.add_argument("--smooth", choices=MESH_SMOOTHING,
+                   help=f"position targets on the Phong-tessellated mesh or on its flat "
+                        f"triangles (default: {MESH_SMOOTHING[0]})")
 
 
-def _add_flow_options(p, points_help):
-    """The options heat and mcf share: time, snapshots, sampling, refits, output."""
+def _add_flow_options(p, options):
+    """The options heat and mcf share: time, snapshots, sampling, refits, output; ``options``
+    is the flow's options dataclass (HeatOptions, MCFOptions)."""
+    from .options import DEFAULT_SCHEME, DEFAULT_SNAPSHOTS, SCHEMES, add_arguments
     p.add_argument("--t-end", type=_positive_float, required=True, help="final time")
     p.add_argument("--dt", type=_positive_float, help="time step (default t_end / 100)")
-    p.add_argument("--snapshots", type=_positive_int, default=10,
-                   help="number of snapshots after t = 0 (10)")
-    p.add_argument("--points", type=_positive_int,
-                   help=f"{points_help} (default: at the stability limit)")
-    p.add_argument("--refit-steps", type=int,
-                   help="optimiser steps per refit (100; a time step has one refit with "
-                        "euler, two with heun or midpoint)")
+    p.add_argument("--snapshots", type=_positive_int, default=DEFAULT_SNAPSHOTS,
+                   help="number of snapshots after t = 0 (%(default)s)")
+    add_arguments(p, options, _FLOW_FLAGS, flags={"n_points": "--points"})
     p.add_argument("--level", type=int, default=5, help="icosphere level of the snapshots (5)")
-    p.add_argument("--scheme", choices=["heun", "midpoint", "euler"], default="heun",
+    p.add_argument("--scheme", choices=list(SCHEMES), default=DEFAULT_SCHEME,
                    help="time scheme: heun or midpoint (second order, two refits per step) or "
                         "euler (the paper's first-order step, one refit); the spectral heat "
                         "method is exact in time and ignores it (default: %(default)s)")
@@ -99,13 +81,23 @@ def _add_flow_options(p, points_help):
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+#: the flow options that heat and mcf both put on the command line
+_FLOW_FLAGS = ("n_points", "refit_steps")
+
+
 def _fit_kwargs(args):
-    keys = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-            "normal_weight", "input_scale", "dtype", "seed", "smooth")
-    return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
+    return given_arguments(args, FIT_FLAGS + ("smooth",))
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .options import (
+        CHECKPOINT_SECONDS,
+        CHECKPOINT_STEPS,
+        HEAT_METHODS,
+        HeatOptions,
+        MCFOptions,
+        add_arguments,
+    )
     parser = _Parser(
         prog="sns-np",
         description="Spherical Neural Surfaces: fit genus-0 meshes with a hand-differentiated "
@@ -142,9 +134,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", required=True, help="output model (.npz)")
     p.add_argument("--checkpoint", help="checkpoint file (.npz; default OUTPUT.ckpt.npz)")
     p.add_argument("--resume", action="store_true", help="continue from the checkpoint")
-    p.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
-                   help="write the checkpoint at least this often (default: %(default)g s; "
-                        "also every 500 steps)")
+    p.add_argument("--checkpoint-every", type=_positive_float, default=CHECKPOINT_SECONDS,
+                   metavar="SECONDS",
+                   help=f"write the checkpoint at least this often (default: %(default)g s; "
+                        f"also every {CHECKPOINT_STEPS} steps)")
     p.add_argument("--keep-checkpoint", action="store_true",
                    help="keep the checkpoint after a successful fit (default: remove it)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -212,9 +205,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--field", required=True,
                    help="initial field: 'sh:L,M' (spherical harmonic of the sphere point), "
                         "'x', 'y' or 'z' (a coordinate of the surface) or a NeuralField .npz")
-    p.add_argument("--method", choices=["network", "spectral"], default="network")
-    p.add_argument("-k", type=_positive_int, help="eigenmodes of the spectral scheme (50)")
-    _add_flow_options(p, "sample points of the network scheme")
+    p.add_argument("--method", choices=HEAT_METHODS, default=HEAT_METHODS[0],
+                   help="explicit steps of a network, or exact in time through eigenmodes "
+                        "(default: %(default)s)")
+    add_arguments(p, HeatOptions, ("k",), flags={"k": "-k"})
+    _add_flow_options(p, HeatOptions)
     p.set_defaults(func=_cmd_heat)
 
     p = sub.add_parser("mcf", help="mean curvature flow of a model",
@@ -222,8 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "X_t = -2 H n and write PLY snapshots (normal, H, K per vertex) and the "
                        "snapshot models into a new output folder, written atomically.")
     p.add_argument("model", help="fitted model (.npz)")
-    p.add_argument("--lr", type=_positive_float, help="refit learning rate (1e-4)")
-    _add_flow_options(p, "sample points per step")
+    add_arguments(p, MCFOptions, ("lr",))
+    _add_flow_options(p, MCFOptions)
     p.set_defaults(func=_cmd_mcf)
 
     p = sub.add_parser("batch", help="fit many meshes, or their spectra, on a Dask cluster",
@@ -248,7 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--resume", action="store_true",
                    help="accepted for symmetry with 'sns-np fit': a batch always resumes "
                         "from the checkpoints it finds")
-    b.add_argument("--checkpoint-every", type=_positive_float, default=60.0, metavar="SECONDS",
+    b.add_argument("--checkpoint-every", type=_positive_float, default=CHECKPOINT_SECONDS,
+                   metavar="SECONDS",
                    help="write each fit's checkpoint at least this often (default: %(default)g"
                         " s): a killed worker loses at most that much of its fit")
     b.add_argument("--keep-checkpoint", action="store_true",
@@ -586,14 +582,7 @@ def _cmd_heat(args):
     S = _load_model(args.model)
     field = _parse_field(args.field, S)
     dt = args.dt or args.t_end / 100
-    opts = {}
-    if args.method == "network":
-        if args.points:
-            opts["n_points"] = args.points
-        if args.refit_steps is not None:
-            opts["refit_steps"] = args.refit_steps
-    elif args.k:
-        opts["k"] = args.k
+    opts = given_arguments(args, _FLOW_FLAGS if args.method == "network" else ("k",))
     _run_flow(lambda: heat_flow(S, field, args.t_end, dt, method=args.method,
                                 scheme=args.scheme, n_snapshots=args.snapshots,
                                 stability="ignore" if args.force else "raise", rng=args.seed,
@@ -607,8 +596,7 @@ def _cmd_mcf(args):
     out = _check_output_folder(args.output, args.level)
     S = _load_model(args.model)
     dt = args.dt or args.t_end / 100
-    opts = {k: v for k, v in (("n_points", args.points), ("refit_steps", args.refit_steps),
-                              ("lr", args.lr)) if v is not None}
+    opts = given_arguments(args, _FLOW_FLAGS + ("lr",))
     res = _run_flow(lambda: mean_curvature_flow(
         S, args.t_end, dt, scheme=args.scheme, n_snapshots=args.snapshots,
         stability="ignore" if args.force else "raise", rng=args.seed,

@@ -10,6 +10,7 @@ import socket
 import time
 from pathlib import Path
 
+from ..options import CHECKPOINT_SECONDS
 from .cluster import connect, dashboard_address, limit_threads, run_tasks, say, thread_counts
 from .table import Table
 
@@ -160,7 +161,7 @@ def _check_names(meshes):
 
 
 def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, threads_per_fit=1,
-             checkpoint_dir=None, checkpoint_seconds=60.0, keep_checkpoint=False,
+             checkpoint_dir=None, checkpoint_seconds=CHECKPOINT_SECONDS, keep_checkpoint=False,
              progress=True, **fit_options):
     """Fit every mesh on a Dask cluster; one ``NAME.npz`` per mesh and a summary in out_dir.
 
@@ -199,7 +200,9 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     progress : bool
         A progress bar over shapes on stderr, and the dashboard address.
     **fit_options
-        Options of :func:`sns_np.surface.fit_mesh` (steps, time_budget, width, depth, ...).
+        Options of :func:`sns_np.surface.fit_mesh`: the fields of
+        :class:`~sns_np.surface.FitOptions` (steps, time_budget, width, depth, ...) and
+        ``smooth``.
 
     Returns
     -------
@@ -233,11 +236,12 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     reserved = sorted(set(fit_options) & set(_RESERVED))
     if reserved:
         raise TypeError(f"fit_many sets {', '.join(reserved)} itself for every fit")
-    from ..surface.fit import DEFAULTS
-    unknown = sorted(set(fit_options) - set(DEFAULTS) - set(_RUNTIME) - {"smooth"})
-    if unknown:
-        raise TypeError(f"unknown fitting option(s) {', '.join(map(repr, unknown))}; expected "
-                        f"some of {', '.join(sorted(DEFAULTS))} or smooth")
+    from .._validation import check_choice
+    from ..options import MESH_SMOOTHING, FitOptions
+    # unknown names and bad values are refused here, before the cluster starts
+    FitOptions.split(fit_options, extra=_RUNTIME + ("smooth",))
+    if fit_options.get("smooth") is not None:
+        check_choice(fit_options["smooth"], "smooth", set(MESH_SMOOTHING))
     threads = int(threads_per_fit)
     if threads < 1:
         raise ValueError(f"threads_per_fit must be >= 1, got {threads_per_fit}")

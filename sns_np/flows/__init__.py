@@ -10,6 +10,7 @@ stability_limit         ``A / (2 pi N)``, the largest stable step
                         (the same for every scheme)
 amplification           ``R(z)``, the factor by which one step of a scheme
                         multiplies a heat eigenmode
+HeatOptions, MCFOptions  the options of the two flows: defaults, help and checks
 fit_sdf                 a SphericalNeuralSurface on the zero set of a signed distance function
                         (also ``SphericalNeuralSurface.fit_sdf``); an :class:`SDFFitReport`
 
@@ -17,11 +18,11 @@ The equations are mapped to the code, and the accuracy measured, in ``docs/flows
 """
 
 from ._common import SCHEMES, StabilityWarning, amplification, stability_limit
-from .heat import HEAT_DEFAULTS, HeatFlowResult, ModalField, heat_flow
-from .mcf import MCF_DEFAULTS, MeanCurvatureFlowResult, mean_curvature_flow
+from .heat import HEAT_DEFAULTS, HeatFlowResult, HeatOptions, ModalField, heat_flow
+from .mcf import MCF_DEFAULTS, MCFOptions, MeanCurvatureFlowResult, mean_curvature_flow
 from .sdf import SDFFitReport, fit_sdf, project_to_zero_set
 
-__all__ = ["heat_flow", "HeatFlowResult", "ModalField", "HEAT_DEFAULTS",
-           "mean_curvature_flow", "MeanCurvatureFlowResult", "MCF_DEFAULTS",
+__all__ = ["heat_flow", "HeatFlowResult", "HeatOptions", "ModalField", "HEAT_DEFAULTS",
+           "mean_curvature_flow", "MeanCurvatureFlowResult", "MCFOptions", "MCF_DEFAULTS",
            "fit_sdf", "SDFFitReport", "project_to_zero_set", "StabilityWarning",
            "stability_limit", "amplification", "SCHEMES"]

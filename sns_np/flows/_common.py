@@ -10,6 +10,7 @@ import numpy as np
 
 from .._atomic import write_folder
 from .._validation import check_choice, check_positive_float
+from ..options import DEFAULT_SCHEME, DEFAULT_SNAPSHOTS, SCHEMES
 from ..sampling import fibonacci_sphere
 from ..surface.readout import lstsq_readout, surface_readout  # noqa: F401 (used by the flows)
 
@@ -20,7 +21,7 @@ class StabilityWarning(RuntimeWarning):
     """A time step exceeds the stability limit of an explicit scheme."""
 
 
-def check_times(t_end, dt, times=None, n_snapshots=10):
+def check_times(t_end, dt, times=None, n_snapshots=DEFAULT_SNAPSHOTS):
     """Validated ``t_end``, ``dt`` and the ascending snapshot times (start 0, end ``t_end``)."""
     t_end = check_positive_float(t_end, "t_end")
     dt = check_positive_float(dt, "dt")
@@ -62,11 +63,8 @@ def step_points(n, rng):
     return fibonacci_sphere(n) @ random_rotation(rng).T
 
 
-#: explicit time schemes of the network flows: name -> ``(a, b)`` of the two-stage
-#: Runge-Kutta step ``y* = y + a h F(y)``, ``y+ = y + h ((1 - b) F(y) + b F(y*))``
-#: (``None``: one stage, forward Euler, the paper's). ``a b = 1/2`` makes both second order.
-SCHEMES = {"heun": (1.0, 0.5), "midpoint": (0.5, 1.0), "euler": None}
-DEFAULT_SCHEME = "heun"
+# SCHEMES (the explicit time schemes and their Runge-Kutta coefficients), DEFAULT_SCHEME and
+# DEFAULT_SNAPSHOTS live in sns_np.options, with the other choices a user makes
 
 #: length of the real stability interval ``[-c, 0]`` of each scheme's amplification factor
 #: ``R(z)``, ``z = -dt lambda``: Euler ``R = 1 + z``; every two-stage second-order scheme

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._progress import Progress
-from .._validation import as_generator, as_points, check_choice, check_positive_float
+from .._validation import as_generator, as_points, check_choice
 from .._validation import check_positive_int as _pos_int
 from ..errors import DivergenceError
 from ..fields import NeuralField
@@ -54,11 +54,13 @@ from ..geometry import (
 )
 from ..geometry.chart import chart_jet_chunks
 from ..nn.optim import Adam
+from ..options import DEFAULT_SNAPSHOTS, HEAT_METHODS, HeatOptions
 from ..protocol import field_jet
 from ..sampling import fibonacci_sphere, surface_sample
 from ._common import (
     DEFAULT_SCHEME,
     SCHEMES,
+    STABILITY_MODES,
     check_scheme,
     check_stability,
     check_times,
@@ -67,15 +69,12 @@ from ._common import (
     substeps,
 )
 
-__all__ = ["heat_flow", "HeatFlowResult", "ModalField", "HEAT_DEFAULTS"]
+__all__ = ["heat_flow", "HeatFlowResult", "HeatOptions", "ModalField", "HEAT_DEFAULTS"]
 
-METHODS = ("network", "spectral")
+METHODS = HEAT_METHODS
 
-#: options of the network scheme (docs/flows.md measures them)
-HEAT_DEFAULTS = dict(
-    width=10, depth=2, n_points=None, refit_steps=100, lr=1e-3, init_steps=2000,
-    growth=2.0, k=50, n_quad=20000,
-)
+#: the default options as a dict (kept for older code: :class:`HeatOptions` holds them)
+HEAT_DEFAULTS = HeatOptions().to_dict()
 
 
 @dataclass
@@ -250,8 +249,8 @@ class ModalField:
 
 # ------------------------------------------------------------------------------ public API
 
-def heat_flow(surface, field, t_end, dt, method: str = "network", *,
-              scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = 10,
+def heat_flow(surface, field, t_end, dt, method: str = HEAT_METHODS[0], *,
+              scheme: str = DEFAULT_SCHEME, times=None, n_snapshots: int = DEFAULT_SNAPSHOTS,
               stability: str = "warn", rng=None, progress: bool = False,
               **options) -> HeatFlowResult:
     """Evolve a scalar field by the heat equation ``f_t = Delta_S f`` on a surface map.
@@ -274,14 +273,14 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *,
     rng : None, int or Generator (seeds the network initialisation; ``None`` means 0)
     progress : bool, a progress line on stderr
     **options
-        "network": ``width``, ``depth`` (field network, 10 and 2 as the paper; ignored when
-        ``field`` is already a NeuralField, which is copied), ``n_points`` (fixed sample
-        points; default ``A / (2 pi dt)`` clipped to [64, 10242], i.e. at the stability
-        limit), ``refit_steps`` (Adam steps per time step, 100), ``lr`` (1e-3),
-        ``init_steps`` (steps of the initial fit of a non-neural field, 2000), ``growth``
-        (divergence when ``max |f - mean|`` exceeds ``growth`` times its initial value, 2).
-        "spectral": ``k`` (non-constant modes, 50), ``n_quad`` (quadrature nodes for the
-        projection, 20,000) and any option of :func:`sns_np.spectral.eigenmodes` via
+        The fields of :class:`HeatOptions` (their defaults and help are there), checked
+        before any work. "network": ``width``, ``depth`` (field network, as the paper's;
+        ignored when ``field`` is already a NeuralField, which is copied), ``n_points``
+        (fixed sample points; default at the stability limit), ``refit_steps`` (Adam steps
+        per refit), ``lr``, ``init_steps`` (steps of the initial fit of a non-neural field),
+        ``growth`` (divergence when ``max |f - mean|`` exceeds ``growth`` times its initial
+        value). "spectral": ``k`` (non-constant modes), ``n_quad`` (quadrature nodes for the
+        projection) and any option of :func:`sns_np.spectral.eigenmodes` via
         ``eigen_options`` (a dict).
 
     Returns
@@ -310,15 +309,10 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *,
     if not callable(getattr(field, "jet", None)):
         raise TypeError(f"field must follow the field protocol (jet(p, order)); got "
                         f"{type(field).__name__}")
-    allowed = set(HEAT_DEFAULTS) | {"eigen_options"}
-    unknown = set(options) - allowed
-    if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)}; expected some of "
-                         f"{sorted(allowed)}")
-    o = {**HEAT_DEFAULTS, **options}
+    o = HeatOptions.from_kwargs(**options)
     if method == "spectral":
         return _spectral(surface, field, T, o)
-    check_choice(stability, "stability", ("warn", "raise", "ignore"))
+    check_choice(stability, "stability", STABILITY_MODES)
     return _network(surface, field, T, dt, o, stability, as_generator(rng), progress, scheme)
 
 
@@ -327,9 +321,9 @@ def heat_flow(surface, field, t_end, dt, method: str = "network", *,
 def _spectral(surface, field, T, o):
     from ..spectral import HarmonicField, eigenmodes
     t0 = time.perf_counter()
-    k = _pos_int(o["k"], "k")
-    res = eigenmodes(surface, k, method="ritz", **dict(o.get("eigen_options") or {}))
-    quad = surface_sample(surface, _pos_int(o["n_quad"], "n_quad"), "quadrature")
+    k = int(o.k)
+    res = eigenmodes(surface, k, method="ritz", **dict(o.eigen_options or {}))
+    quad = surface_sample(surface, int(o.n_quad), "quadrature")
     f = quad.values(field)
     Phi = res.evaluate(quad.p)
     c = Phi.T @ (quad.weights * f)
@@ -415,15 +409,11 @@ def _refit(f, sample, target, steps, opt):
 
 def _network(surface, field, T, dt, o, stability, rng, progress, scheme):
     t_start = time.perf_counter()
-    refit_steps = _pos_int(o["refit_steps"], "refit_steps", minimum=0)
-    init_steps = _pos_int(o["init_steps"], "init_steps", minimum=0)
-    lr = check_positive_float(o["lr"], "lr")
-    growth = check_positive_float(o["growth"], "growth")
-    if growth <= 1.0:
-        raise ValueError(f"growth must be > 1, got {growth}")
+    # o (HeatOptions) is checked; the conversions keep the types the scheme has always used
+    refit_steps, init_steps = int(o.refit_steps), int(o.init_steps)
+    lr, growth = float(o.lr), float(o.growth)
     area0 = surface_sample(surface, 4096, "quadrature").area
-    n = default_points(area0, dt) if o["n_points"] is None else _pos_int(o["n_points"],
-                                                                          "n_points", 16)
+    n = default_points(area0, dt) if o.n_points is None else int(o.n_points)
     limit = check_stability(dt, area0, n, stability, "heat_flow(method='network')",
                             scheme=scheme)
     sample = _Sample(surface, n)
@@ -432,8 +422,7 @@ def _network(surface, field, T, dt, o, stability, rng, progress, scheme):
         f = field.copy()
         init_rms = 0.0
     else:
-        f = NeuralField(_pos_int(o["width"], "width"), _pos_int(o["depth"], "depth", 0),
-                        seed=rng)
+        f = NeuralField(int(o.width), int(o.depth), seed=rng)
         target0 = field_jet(field, sample.p, 0)
         opt0 = Adam(1e-2)
         ms = _refit(f, sample, target0, init_steps, opt0)

@@ -51,14 +51,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._progress import Progress
-from .._validation import as_generator, check_choice, check_positive_float
+from .._validation import as_generator, check_choice
 from .._validation import check_positive_int as _pos_int
 from ..errors import DegenerateMapError, DivergenceError
 from ..geometry import area_element, differential_quantities
+from ..options import DEFAULT_SNAPSHOTS, MCFOptions
 from ..surface import SphericalNeuralSurface, fit_sampler
 from ._common import (
     DEFAULT_SCHEME,
     SCHEMES,
+    STABILITY_MODES,
     StabilityWarning,
     check_scheme,
     check_stability,
@@ -70,11 +72,10 @@ from ._common import (
     surface_readout,
 )
 
-__all__ = ["mean_curvature_flow", "MeanCurvatureFlowResult", "MCF_DEFAULTS"]
+__all__ = ["mean_curvature_flow", "MeanCurvatureFlowResult", "MCFOptions", "MCF_DEFAULTS"]
 
-#: refit options (docs/flows.md measures them)
-MCF_DEFAULTS = dict(n_points=None, refit_steps=100, lr=1e-4, batch=None, normal_weight=0.0,
-                    dtype="float64", growth=1.5, n_eval=256)
+#: the default options as a dict (kept for older code: :class:`MCFOptions` holds them)
+MCF_DEFAULTS = MCFOptions().to_dict()
 
 
 @dataclass
@@ -204,7 +205,7 @@ def _area(S, n_quad=4096):
 
 
 def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, times=None,
-                        n_snapshots: int = 10, stability: str = "warn",
+                        n_snapshots: int = DEFAULT_SNAPSHOTS, stability: str = "warn",
                         mesh_level: int | None = None, rng=None, progress: bool = False,
                         **options) -> MeanCurvatureFlowResult:
     """Evolve a fitted surface by mean curvature flow ``X_t = Delta_S X = -2 H n``.
@@ -228,13 +229,13 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
     rng : None, int or Generator (sample points and refit batches; ``None`` means 0)
     progress : bool, a progress line on stderr
     **options
-        ``n_points`` (samples per step; default ``A / (4 pi dt)`` clipped to [64, 10242]: the
-        stability limit holds until the area has halved), ``refit_steps`` (100, the paper's
-        "up to 100 epochs"; 0 keeps only the read-out solve), ``lr`` (Adam, constant, 1e-4),
-        ``batch`` (default all points), ``normal_weight`` (0: the targets' normals are known
-        only to O(dt)), ``dtype`` ("float64"), ``growth`` (divergence when the area exceeds
-        ``growth`` times the initial area, 1.5), ``n_eval`` (held-out points per refit
-        report, 256).
+        The fields of :class:`MCFOptions` (their defaults and help are there), checked before
+        any work: ``n_points`` (samples per step; by default the stability limit holds until
+        the area has halved), ``refit_steps`` (the paper's "up to 100 epochs"; 0 keeps only
+        the read-out solve), ``lr`` (Adam, constant), ``batch`` (default all points),
+        ``normal_weight`` (the targets' normals are known only to O(dt)), ``dtype``,
+        ``growth`` (divergence when the area exceeds ``growth`` times the initial area),
+        ``n_eval`` (held-out points per refit report).
 
     Returns
     -------
@@ -268,17 +269,11 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
                         f"SphericalNeuralSurface.fit_shape")
     scheme = check_scheme(scheme)
     t_end, dt, T = check_times(t_end, dt, times, n_snapshots)
-    check_choice(stability, "stability", ("warn", "raise", "ignore"))
-    unknown = set(options) - set(MCF_DEFAULTS)
-    if unknown:
-        raise ValueError(f"unknown option(s) {sorted(unknown)}; expected some of "
-                         f"{sorted(MCF_DEFAULTS)}")
-    o = {**MCF_DEFAULTS, **options}
-    refit_steps = _pos_int(o["refit_steps"], "refit_steps", minimum=0)
-    lr = check_positive_float(o["lr"], "lr")
-    growth = check_positive_float(o["growth"], "growth")
-    n_eval = _pos_int(o["n_eval"], "n_eval")
-    check_choice(o["dtype"], "dtype", ("float32", "float64"))
+    check_choice(stability, "stability", STABILITY_MODES)
+    o = MCFOptions.from_kwargs(**options)
+    # o is checked; the conversions keep the types the flow has always used
+    refit_steps, lr, growth, n_eval = int(o.refit_steps), float(o.lr), float(o.growth), \
+        int(o.n_eval)
     if mesh_level is not None:
         mesh_level = _pos_int(mesh_level, "mesh_level", minimum=0)
     rng = as_generator(rng)
@@ -286,9 +281,8 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
 
     area0 = _area(surface)
     # half the limit's count: the flow shrinks the area, and with it the limit
-    N = default_points(area0 / 2, dt) if o["n_points"] is None else _pos_int(o["n_points"],
-                                                                          "n_points", 16)
-    batch = N if o["batch"] is None else _pos_int(o["batch"], "batch")
+    N = default_points(area0 / 2, dt) if o.n_points is None else int(o.n_points)
+    batch = N if o.batch is None else int(o.batch)
     limit0 = check_stability(dt, area0, N, stability, "mean_curvature_flow", scheme=scheme)
     S = surface
     surfaces, times, areas = [S], [0.0], [area0]
@@ -336,8 +330,8 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
                     warnings.simplefilter("ignore", StabilityWarning)
                     S_new, _ = fit_sampler(
                         target, net=net, steps=refit_steps, batch=batch, lr=lr,
-                        schedule="constant", warmup=0, normal_weight=o["normal_weight"],
-                        dtype=o["dtype"], n_eval=n_eval, seed=rng, progress=False,
+                        schedule="constant", warmup=0, normal_weight=o.normal_weight,
+                        dtype=o.dtype, n_eval=n_eval, seed=rng, progress=False,
                         metadata=dict(S.metadata))
             except DivergenceError as exc:
                 raise diverged(f"the refit diverged ({exc})") from None

@@ -38,20 +38,23 @@ from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP, load_npz, save_npz
 from ..nn.optim import Schedule, make_optimizer
+from ..options import (
+    AUTO,
+    CHECKPOINT_SECONDS,
+    CHECKPOINT_STEPS,
+    DETAIL_RANGE,
+    MESH_SMOOTHING,
+    FitOptions,
+)
 from ..sampling import uniform_sphere
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
-__all__ = ["FitReport", "fit_mesh", "fit_shape", "fit_sampler", "detail", "DEFAULTS"]
+__all__ = ["FitReport", "FitOptions", "fit_mesh", "fit_shape", "fit_sampler", "detail",
+           "DEFAULTS"]
 
-#: default fitting options (docs/fitting.md explains and measures each choice)
-DEFAULTS = dict(
-    width=256, depth=8, steps=None, batch=None, lr=None, lr_min=1e-5, optimizer="adam",
-    schedule="cosine", warmup=None, normal_weight=1.0, dtype="float32", init="ridge",
-    input_scale=None, tangent_weight=1.0, readout_every=0,
-    readout="gn",
-    time_budget=None, tol=None, n_eval=20000, seed=0,
-)
+#: the default fitting options as a dict (kept for older code: :class:`FitOptions` holds them)
+DEFAULTS = FitOptions().to_dict()
 
 
 @dataclass
@@ -227,7 +230,7 @@ def _fingerprint(V, F):
 
 # ------------------------------------------------------------------------------ public API
 
-def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
+def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
     """Fit a SphericalNeuralSurface to a closed genus-0 triangle mesh.
 
     Parameters
@@ -243,7 +246,8 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
         Position targets on the Phong-tessellated mesh (default: the mesh's vertex normals
         bend each triangle like the surface it samples) or on the flat triangles.
     **options
-        See :func:`fit_sampler` (steps, batch, lr, time_budget, checkpoint, ...).
+        The fitting options (:class:`FitOptions`: steps, batch, lr, time_budget, ...) and
+        those of :func:`fit_sampler` (checkpoint, progress, ...).
 
     Returns
     -------
@@ -259,7 +263,7 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth="phong", **options):
     >>> S(np.array([[0.0, 0.0, 1.0]])).shape, report.steps, S.metadata["smooth"]
     ((1, 3), 30, 'phong')
     """
-    check_choice(smooth, "smooth", {"phong", "none"})
+    check_choice(smooth, "smooth", set(MESH_SMOOTHING))
     _check_early(options)
     t0 = time.perf_counter()
     target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
@@ -292,15 +296,16 @@ def fit_shape(shape, **options):
     return fit_sampler(target, metadata=meta, **options)
 
 
-def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, steps=None,
-                batch=None, lr=None, lr_min=None, optimizer=None, schedule=None, warmup=None,
-                normal_weight=None, dtype=None, init=None, input_scale=None, time_budget=None,
-                tol=None, tangent_weight=None, readout_every=None,
-                readout=None, elapsed_before=0.0,
-                n_eval=None, seed=None, checkpoint=None, checkpoint_every=500,
-                checkpoint_seconds=60.0, resume=False, progress=True, callback=None,
-                history_every=50):
+def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoint=None,
+                checkpoint_every=CHECKPOINT_STEPS, checkpoint_seconds=CHECKPOINT_SECONDS,
+                resume=False, progress=True,
+                callback=None, history_every=50, **options):
     """The training loop behind :func:`fit_mesh` and :func:`fit_shape`.
+
+    The fitting options are the fields of :class:`FitOptions`, passed as keyword arguments
+    (``None`` leaves an option at its default; an unknown name is refused before any work).
+    Their defaults and one-line help are the dataclass's; the notes below say why they are
+    what they are.
 
     Parameters
     ----------
@@ -310,57 +315,56 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
-        Architecture of a fresh network (default 256 x 8, the reference's).
+        Architecture of a fresh network (by default the reference's).
     steps : int, optional
         Step budget. Default: as many steps as fit in ``time_budget``, with the cosine decay
         running on the clock (over the fraction of the budget elapsed).
     batch : int
-        Fresh samples per step. Default: chosen from the target's :func:`detail`, 2048 (the
-        reference's) for a smooth target, 512 for a detailed one: in the same time, 3.3 times
-        as many steps of a quarter of the samples fit detail better (docs/fitting.md). A
-        warm start ``net`` uses the smooth end's.
+        Fresh samples per step. Default: chosen from the target's :func:`detail`, the
+        reference's for a smooth target and a quarter of it for a detailed one: in the same
+        time, 3.3 times as many steps of a quarter of the samples fit detail better
+        (docs/fitting.md). A warm start ``net`` uses the smooth end's.
     lr, lr_min, schedule, warmup, optimizer
-        Adam by default, cosine decay from ``lr`` to ``lr_min`` = 1e-5 with a linear warm-up
-        of ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
-        :func:`detail` (1e-4 and 50 for a smooth target, 4e-3 and 100 for a detailed one; a
-        warm start ``net`` uses the smooth end's). ``optimizer="rmsprop", lr=1e-4,
-        schedule="constant", normal_weight=1e-4`` reproduces the reference's settings.
+        Adam by default, cosine decay from ``lr`` to ``lr_min`` with a linear warm-up of
+        ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
+        :func:`detail` (``AUTO``; a warm start ``net`` uses the smooth end's).
+        ``optimizer="rmsprop", lr=1e-4, schedule="constant", normal_weight=1e-4`` reproduces
+        the reference's settings.
     normal_weight : float
-        Weight of the normal term (default 1.0; the reference's 1e-4 leaves the normals to
-        the position term, which on a mesh is dominated by the tangential error of the
-        spherical embedding: docs/fitting.md measures both).
+        Weight of the normal term (the reference's 1e-4 leaves the normals to the position
+        term, which on a mesh is dominated by the tangential error of the spherical
+        embedding: docs/fitting.md measures both).
     dtype : {"float32", "float64"}
-        Training precision (default float32; the result is float64).
+        Training precision (the result is float64).
     init : {"ridge", "random"}
-        "ridge" (default) sets the output layer of a fresh network by regularised least squares
-        on its initial features, so training starts from the best linear read-out instead of a
-        point (see docs/fitting.md for the measured effect).
+        "ridge" sets the output layer of a fresh network by regularised least squares on its
+        initial features, so training starts from the best linear read-out instead of a point
+        (see docs/fitting.md for the measured effect).
     input_scale : float
-        First-layer scale of a fresh network (``W0`` std ``input_scale / sqrt(3)``; the
-        network's own default is 2). Default: chosen from the target's :func:`detail`, 4 for
-        a smooth target (a larger scale makes the curvature of a coarse mesh of a smooth shape
-        follow its facets) and 40 for a detailed one (features that vary fast enough for
-        ears, horns and faces), interpolated in between (docs/fitting.md).
+        First-layer scale of a fresh network (``W0`` std ``input_scale / sqrt(3)``). Default:
+        chosen from the target's :func:`detail`, small for a smooth target (a larger scale
+        makes the curvature of a coarse mesh of a smooth shape follow its facets) and ten
+        times larger for a detailed one (features that vary fast enough for ears, horns and
+        faces), interpolated in between (docs/fitting.md).
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step). Default when ``steps`` is not given either:
-        chosen from the target's detail, 240 s (smooth) to 540 s (detailed) in all, less the
-        ``elapsed_before`` seconds already spent (the embedding). A ``steps`` that this budget
-        cannot reach is refused before the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
+        chosen from the target's detail, in all, less the ``elapsed_before`` seconds already
+        spent (the embedding). A ``steps`` that this budget cannot reach is refused before
+        the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
     tangent_weight : float
-        Weight of the tangential part of the position error (default 1: the plain squared
-        distance); smaller values let points slide along the target (docs/fitting.md).
+        Weight of the tangential part of the position error (1: the plain squared distance);
+        smaller values let points slide along the target (docs/fitting.md).
     readout_every : int
-        Refit the output layer every this many steps (default 0: never) by
-        ``readout="gn"`` (Levenberg-Marquardt on the full position + normal loss) or
-        ``"ridge"`` (least squares on the positions only).
+        Refit the output layer every this many steps (0: never) by ``readout="gn"``
+        (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
+        squares on the positions only).
     tol : float, optional
         Stop when the running RMS position error, relative to the normalised size (the
         surface has area 4 pi), falls below ``tol``.
     n_eval : int
-        Held-out sphere points for the report (default 20,000; fixed seed, not used in
-        training).
+        Held-out sphere points for the report (fixed seed, not used in training).
     seed : int or Generator
-        Seed of initialisation and sampling (default 0).
+        Seed of initialisation and sampling.
     checkpoint : path, optional
         .npz file written atomically every ``checkpoint_every`` steps or ``checkpoint_seconds``
         seconds, whichever comes first, on interruption and at the end (the file is kept: the
@@ -370,7 +374,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
         checkpoint is refused (:class:`~sns_np._atomic.OutputBusyError`), and temporary files
         that a killed fit left beside the checkpoint are removed.
     checkpoint_every, checkpoint_seconds : int, float
-        Checkpoint cadence (500 steps, 60 s): a crash loses at most about a minute.
+        Checkpoint cadence (``CHECKPOINT_STEPS``, ``CHECKPOINT_SECONDS``): a crash loses at
+        most about a minute.
     progress : bool
         Show a progress line on stderr.
     callback : callable ``callback(step, info) -> bool``, optional
@@ -405,21 +410,12 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
     >>> report.stopped, report.choices["steps"]["value"] == report.steps
     ('time budget', True)
     """
-    o = dict(DEFAULTS)
-    given = dict(width=width, depth=depth, steps=steps, batch=batch, lr=lr, lr_min=lr_min,
-                 optimizer=optimizer, schedule=schedule, warmup=warmup,
-                 normal_weight=normal_weight, dtype=dtype, init=init, input_scale=input_scale,
-                 time_budget=time_budget, tangent_weight=tangent_weight,
-                 readout_every=readout_every, readout=readout,
-                 tol=tol, n_eval=n_eval, seed=seed)
-    o.update({k: v for k, v in given.items() if v is not None})
-    _check_options(o)
+    o = FitOptions.from_kwargs(**options).to_dict()
     _check_checkpoint_options(checkpoint, checkpoint_every, checkpoint_seconds)
     t_dtype = np.dtype(o["dtype"])
-    choices = _plan(target, o, {k for k, v in given.items() if v is not None}, net,
-                    elapsed=elapsed_before)
+    choices = _plan(target, o, net, elapsed=elapsed_before)     # fills in the "auto" options
     rng = as_generator(o["seed"])
-    key = _resume_key(target, o, net)
+    key = _resume_key(target, FitOptions(**o), net)
     with contextlib.ExitStack() as hold:
         if checkpoint is not None:
             hold.enter_context(exclusive(checkpoint))       # one fit per checkpoint at a time
@@ -586,19 +582,8 @@ def fit_sampler(target, *, metadata=None, net=None, width=None, depth=None, step
 
 # ------------------------------------------------------------------------------ planning
 
-#: the read-out error of scale-4 features (normalised units, area 4 pi; :func:`detail`) at
-#: and below which a target is treated as smooth, and at and above which as detailed; in
-#: between, the choices are interpolated on a log scale. Measured (docs/fitting.md): spheres
-#: and ellipsoids 6e-4 - 3.3e-3; spot, max, the armadillo and the paper's shapes 3e-2 - 1.2e-1
-DETAIL_RANGE = (5e-3, 2e-2)
-
-#: the options "auto" chooses at either end of DETAIL_RANGE
-AUTO = {
-    "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
-               "batch": 2048},
-    "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512},
-}
+# DETAIL_RANGE (where a target counts as smooth or detailed) and AUTO (what "auto" chooses at
+# either end) live in sns_np.options, beside the options they fill in
 
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
@@ -685,17 +670,17 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
     return float(np.sqrt((r ** 2).sum(axis=1).mean()))
 
 
-def _plan(target, o, given, net, elapsed=0.0):
-    """Fill the options left to "auto" from the target's detail; returns the choices made
-    (option -> {"value", "why"})."""
+def _plan(target, o, net, elapsed=0.0):
+    """Fill the options left to "auto" (None) from the target's detail; returns the choices
+    made (option -> {"value", "why"})."""
     choices = {}
     if net is not None:
         # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
         for k in ("lr", "warmup", "batch"):
-            if k not in given:
+            if o[k] is None:
                 o[k] = AUTO["smooth"][k]
     todo = [k for k in ("input_scale", "lr", "warmup", "batch")
-            if k not in given and net is None]
+            if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
@@ -729,23 +714,17 @@ _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resum
 
 def _check_early(options):
     """Refuse unknown or contradictory options before any work (embedding, fitting) starts."""
-    unknown = sorted(set(options) - set(DEFAULTS) - set(_PASSED))
-    if unknown:
-        raise TypeError(f"unknown fitting option(s) {', '.join(map(repr, unknown))}; expected "
-                        f"some of {', '.join(sorted(DEFAULTS))} or "
-                        f"{', '.join(_PASSED)}")
-    o = dict(DEFAULTS)
-    o.update({k: v for k, v in options.items() if k in DEFAULTS and v is not None})
-    _check_options(o)
-    _check_checkpoint_options(options.get("checkpoint"), options.get("checkpoint_every", 500),
-                              options.get("checkpoint_seconds", 60.0))
-    if o["steps"] is not None and o["time_budget"] is not None and options.get("net") is None:
+    o, rest = FitOptions.split(options, extra=_PASSED)
+    _check_checkpoint_options(rest.get("checkpoint"),
+                              rest.get("checkpoint_every", CHECKPOINT_STEPS),
+                              rest.get("checkpoint_seconds", CHECKPOINT_SECONDS))
+    if o.steps is not None and o.time_budget is not None and rest.get("net") is None:
         per_step = _probe_step_time(o)
-        if o["steps"] * per_step > 2.0 * o["time_budget"]:
+        if o.steps * per_step > 2.0 * o.time_budget:
             raise ValueError(
-                f"steps={o['steps']} cannot be reached in time_budget={o['time_budget']:g} s: "
+                f"steps={o.steps} cannot be reached in time_budget={o.time_budget:g} s: "
                 f"a step of this network takes about {per_step * 1e3:.0f} ms here, so "
-                f"{o['steps']} steps need about {o['steps'] * per_step:.0f} s; pass only one "
+                f"{o.steps} steps need about {o.steps * per_step:.0f} s; pass only one "
                 f"of them (time_budget alone sizes the step count to fit)")
 
 
@@ -760,12 +739,12 @@ def _check_checkpoint_options(path, every, seconds):
 
 
 def _probe_step_time(o, repeats=2):
-    """Seconds per training step of the options' network and batch, measured on this machine
-    (a fresh network, random points: about a second)."""
+    """Seconds per training step of the options' (FitOptions) network and batch, measured on
+    this machine (a fresh network, random points: about a second)."""
     g = np.random.default_rng(0)
-    net = ResidualMLP(width=o["width"], depth=o["depth"], seed=g, dtype=np.dtype(o["dtype"]))
+    net = ResidualMLP(width=o.width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
     # an automatic batch is not known yet: the smallest it can be (lenient)
-    batch = o["batch"] or min(end["batch"] for end in AUTO.values())
+    batch = o.batch or min(end["batch"] for end in AUTO.values())
     p = uniform_sphere(batch, g)
     pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
 
@@ -777,35 +756,6 @@ def _probe_step_time(o, repeats=2):
     for _ in range(repeats):
         net.value_and_grad(pc, loss_fn, order=1, directions=R)
     return (time.perf_counter() - t) / repeats
-
-
-def _check_options(o):
-    check_positive_int(o["width"], "width")
-    check_positive_int(o["depth"], "depth", minimum=0)
-    if o["steps"] is not None:
-        check_positive_int(o["steps"], "steps")
-    if o["batch"] is not None:
-        check_positive_int(o["batch"], "batch")
-    check_positive_int(o["n_eval"], "n_eval")
-    if o["warmup"] is not None:
-        check_positive_int(o["warmup"], "warmup", minimum=0)
-    if o["lr"] is not None:
-        check_positive_float(o["lr"], "lr")
-    check_positive_float(o["lr_min"], "lr_min", allow_zero=True)
-    check_positive_float(o["normal_weight"], "normal_weight", allow_zero=True)
-    if o["input_scale"] is not None:
-        check_positive_float(o["input_scale"], "input_scale")
-    check_choice(o["optimizer"], "optimizer", {"adam", "rmsprop", "sgd"})
-    check_choice(o["schedule"], "schedule", {"constant", "cosine"})
-    check_choice(o["dtype"], "dtype", {"float32", "float64"})
-    check_choice(o["init"], "init", {"ridge", "random"})
-    check_choice(o["readout"], "readout", {"gn", "ridge"})
-    check_positive_float(o["tangent_weight"], "tangent_weight")
-    check_positive_int(o["readout_every"], "readout_every", minimum=0)
-    if o["time_budget"] is not None:
-        check_positive_float(o["time_budget"], "time_budget")
-    if o["tol"] is not None:
-        check_positive_float(o["tol"], "tol")
 
 
 def _schedule(o):
@@ -925,12 +875,11 @@ def _evaluate(surface, target, n_eval):
                      normal_max_deg=float(ang.max()))
 
 
-def _resume_key(target, o, net):
-    keep = {k: o[k] for k in ("width", "depth", "steps", "batch", "lr", "lr_min", "optimizer",
-                              "schedule", "warmup", "normal_weight", "dtype", "init",
-                              "input_scale", "tangent_weight", "readout_every", "readout")}
+def _resume_key(target, options, net):
+    """What a checkpoint must match to be resumed: the planned FitOptions' resume key, the
+    target and the warm start."""
+    keep = options.resume_key()
     keep["smooth"] = getattr(target, "smooth", None)
-    keep["seed"] = o["seed"] if isinstance(o["seed"], (int, np.integer)) else "generator"
     keep["target"] = target.fingerprint
     keep["warm_start"] = None if net is None else _fingerprint(net.theta, None)
     return json.dumps(keep, sort_keys=True, default=str)

@@ -1,0 +1,484 @@
+"""The options of the long-running operations, one frozen dataclass each.
+
+FitOptions       fitting a SphericalNeuralSurface (:func:`sns_np.surface.fit_mesh`, ...)
+HeatOptions      the heat flow (:func:`sns_np.flows.heat_flow`)
+MCFOptions       the mean curvature flow (:func:`sns_np.flows.mean_curvature_flow`)
+
+Each field is one option: its default (``None`` means "auto": the operation chooses it and
+says why), its help text and its check live together in the field, so the functions, the
+``sns-np`` command and the examples all read them from here and no default is written twice.
+A field's ``metadata`` holds ``help`` (one line), ``check`` (an :class:`Int`, :class:`Real`,
+:class:`Choice` or :class:`Any`) and ``resume`` (part of the key that a checkpoint must match
+to be resumed).
+
+This module is light (NumPy only), so that the command line can build its options from it
+without importing the network engine.
+
+Examples
+--------
+>>> o = FitOptions.from_kwargs(width=64, steps=None)   # None: the default
+>>> o.width, o.depth, o.steps
+(64, 8, None)
+>>> FitOptions.help("depth")
+'residual blocks of a fresh network'
+>>> HeatOptions().refit_steps, MCFOptions().lr
+(100, 0.0001)
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import numbers
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from ._validation import check_choice, check_positive_float, check_positive_int
+
+__all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
+           "given_arguments", "AUTO", "DETAIL_RANGE", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS",
+           "HEAT_METHODS"]
+
+
+class UnknownOptionError(TypeError, ValueError):
+    """An option name that the operation does not know (a TypeError, like an unexpected
+    keyword argument, and a ValueError, like any other bad option)."""
+
+
+# ------------------------------------------------------------------------------ checks
+
+class Int:
+    """An integer ``>= minimum``."""
+
+    parse = int
+
+    def __init__(self, minimum=1):
+        self.minimum = minimum
+
+    def __call__(self, value, name):
+        check_positive_int(value, name, self.minimum)
+
+
+class Real:
+    """A finite number ``> 0`` (``>= 0`` with ``allow_zero``)."""
+
+    parse = float
+
+    def __init__(self, allow_zero=False):
+        self.allow_zero = allow_zero
+
+    def __call__(self, value, name):
+        check_positive_float(value, name, self.allow_zero)
+
+
+class Choice:
+    """One of a few strings."""
+
+    parse = str
+
+    def __init__(self, *values):
+        self.values = values
+
+    def __call__(self, value, name):
+        check_choice(value, name, set(self.values))
+
+
+class Any:
+    """Anything: the operation checks it where it uses it (a seed, a dict of options).
+    ``parse`` reads it from the command line."""
+
+    def __init__(self, parse=str):
+        self.parse = parse
+
+    def __call__(self, value, name):
+        pass
+
+
+def option(default, help, check, resume=False):
+    """A dataclass field for one option: its default, one line of help, its check and
+    whether it is part of the resume key."""
+    return dataclasses.field(default=default,
+                             metadata={"help": help, "check": check, "resume": resume})
+
+
+# ------------------------------------------------------------------------------ base
+
+class Options:
+    """What every options dataclass shares: construction from keyword arguments, checks,
+    the resume key and the conversion to and from the metadata of model files.
+
+    Examples
+    --------
+    >>> o = MCFOptions.from_kwargs(lr=1e-3, batch=None)
+    >>> o.replace(refit_steps=5).to_dict()["refit_steps"], o.refit_steps   # frozen: a copy
+    (5, 100)
+    >>> MCFOptions.from_dict({"lr": 1e-3, "mcf_time": 0.5}) == o           # others ignored
+    True
+    >>> MCFOptions.names()[:3], MCFOptions.help("batch")
+    (('n_points', 'refit_steps', 'lr'), 'samples per refit step (default: all points)')
+    """
+
+    #: the start of the message naming unknown options ({names} is filled in)
+    _unknown = "unknown option(s) {names}"
+
+    def __post_init__(self):
+        self.check()
+
+    def check(self):
+        """Check every option (a ValueError naming the option and what was expected)."""
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if value is None and f.default is None:        # "auto"
+                continue
+            f.metadata["check"](value, f.name)
+
+    @classmethod
+    def names(cls):
+        """The option names, in order."""
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    @classmethod
+    def field(cls, name):
+        """The dataclass field of option ``name``."""
+        return next(f for f in dataclasses.fields(cls) if f.name == name)
+
+    @classmethod
+    def help(cls, name):
+        """The help text of option ``name``."""
+        return cls.field(name).metadata["help"]
+
+    @classmethod
+    def from_kwargs(cls, **kwargs):
+        """The options from keyword arguments; ``None`` means the default, and unknown names
+        are refused (:class:`UnknownOptionError`, listing the valid ones)."""
+        return cls.split(kwargs)[0]
+
+    @classmethod
+    def split(cls, kwargs, extra=()):
+        """``(options, rest)``: the options among ``kwargs`` and the names in ``extra``
+        (keyword arguments the caller handles itself). Any other name is refused."""
+        names = cls.names()
+        unknown = sorted(set(kwargs) - set(names) - set(extra))
+        if unknown:
+            valid = ", ".join(sorted(names)) + (f" or {', '.join(extra)}" if extra else "")
+            raise UnknownOptionError(
+                cls._unknown.format(names=", ".join(map(repr, unknown)))
+                + f"; expected some of {valid}")
+        known = {k: v for k, v in kwargs.items() if k in names and v is not None}
+        rest = {k: v for k, v in kwargs.items() if k not in names}
+        return cls(**known), rest
+
+    def replace(self, **changes):
+        """A copy with some options changed (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+    def to_dict(self):
+        """The options as a dict, in field order (what a model's metadata keeps)."""
+        return {name: getattr(self, name) for name in self.names()}
+
+    @classmethod
+    def from_dict(cls, d):
+        """The options kept in a metadata dict (other keys are ignored)."""
+        return cls(**{k: v for k, v in d.items() if k in cls.names() and v is not None})
+
+    def resume_key(self):
+        """The options a checkpoint must match to be resumed, as a dict."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.metadata["resume"]}
+
+
+def _is_int(value):
+    return isinstance(value, numbers.Integral)
+
+
+# ------------------------------------------------------------------------------ fit
+
+#: the read-out error of scale-4 features (normalised units, area 4 pi;
+#: :func:`sns_np.surface.fit.detail`) at and below which a target is treated as smooth, and at
+#: and above which as detailed; in between, the choices are interpolated on a log scale.
+#: Measured (docs/fitting.md): spheres and ellipsoids 6e-4 - 3.3e-3; spot, max, the armadillo
+#: and the paper's shapes 3e-2 - 1.2e-1
+DETAIL_RANGE = (5e-3, 2e-2)
+
+#: the options "auto" chooses at either end of DETAIL_RANGE
+AUTO = {
+    "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
+               "batch": 2048},
+    "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
+                 "batch": 512},
+}
+
+#: checkpoint cadence of a fit (``checkpoint_every`` steps, ``checkpoint_seconds`` seconds,
+#: whichever comes first): a crash loses at most about a minute
+CHECKPOINT_STEPS = 500
+CHECKPOINT_SECONDS = 60.0
+
+#: position targets of a mesh fit (``fit_mesh(smooth=...)``), the default first: the
+#: Phong-tessellated mesh or its flat triangles
+MESH_SMOOTHING = ("phong", "none")
+
+
+def _auto(name, unit=""):
+    """How "auto" chooses option ``name``, with the values at either end (for help texts)."""
+    s, d = AUTO["smooth"][name], AUTO["detailed"][name]
+    return (f"chosen from the target's detail, {s:g}{unit} for a smooth target, {d:g}{unit} "
+            f"for a detailed one")
+
+
+@dataclass(frozen=True)
+class FitOptions(Options):
+    """The options of a fit (:func:`sns_np.surface.fit_mesh`, :func:`~sns_np.surface.fit_shape`,
+    :func:`~sns_np.surface.fit_sampler`); docs/fitting.md explains and measures each choice.
+
+    ``None`` means "auto": the fit chooses the value from the target's detail and reports the
+    choice and its reason (``FitReport.choices``).
+
+    Examples
+    --------
+    >>> o = FitOptions(width=32, depth=2, steps=100)
+    >>> o.lr is None, o.to_dict()["optimizer"]           # lr: chosen by the fit
+    (True, 'adam')
+    >>> FitOptions.from_dict(o.to_dict()) == o           # as kept in a model's metadata
+    True
+    >>> FitOptions(steps=0)
+    Traceback (most recent call last):
+    ...
+    ValueError: steps must be an integer >= 1, got 0
+    >>> FitOptions.from_kwargs(widht=32)
+    Traceback (most recent call last):
+    ...
+    sns_np.options.UnknownOptionError: unknown fitting option(s) 'widht'; expected some of ...
+    """
+
+    _unknown = "unknown fitting option(s) {names}"
+
+    width: int = option(256, "network width", Int(1), resume=True)
+    depth: int = option(8, "residual blocks of a fresh network", Int(0), resume=True)
+    steps: int | None = option(
+        None, "step budget (default: as many as fit the time budget, with the learning rate "
+        "decaying with the time elapsed)", Int(1), resume=True)
+    batch: int | None = option(None, f"fresh samples per step (default: {_auto('batch')})",
+                               Int(1), resume=True)
+    lr: float | None = option(None, f"peak learning rate (default: {_auto('lr')})", Real(),
+                              resume=True)
+    lr_min: float = option(1e-5, "final learning rate of the cosine schedule",
+                           Real(allow_zero=True), resume=True)
+    optimizer: str = option("adam", "optimiser", Choice("adam", "rmsprop", "sgd"), resume=True)
+    schedule: str = option("cosine", "learning-rate schedule", Choice("constant", "cosine"),
+                           resume=True)
+    warmup: int | None = option(None, f"steps of linear learning-rate warm-up "
+                                f"(default: {_auto('warmup')})", Int(0), resume=True)
+    normal_weight: float = option(1.0, "weight of the normal loss", Real(allow_zero=True),
+                                  resume=True)
+    dtype: str = option("float32", "training precision; the result is float64",
+                        Choice("float32", "float64"), resume=True)
+    init: str = option("ridge", "output layer of a fresh network: the least-squares read-out "
+                       "of its initial features, or random", Choice("ridge", "random"),
+                       resume=True)
+    input_scale: float | None = option(
+        None, f"scale of the first layer's initial weights (default: "
+        f"{_auto('input_scale')}, interpolated in between)", Real(), resume=True)
+    tangent_weight: float = option(1.0, "weight of the tangential part of the position error",
+                                   Real(), resume=True)
+    readout_every: int = option(0, "refit the output layer every this many steps (0: never)",
+                                Int(0), resume=True)
+    readout: str = option("gn", "how the output layer is refitted: Levenberg-Marquardt on the "
+                          "whole loss, or least squares on the positions",
+                          Choice("gn", "ridge"), resume=True)
+    time_budget: float | None = option(
+        None, f"seconds of fitting, checked every step (default when steps is not given either: "
+        f"{_auto('time_budget', ' s')}, in all)", Real())
+    tol: float | None = option(None, "stop when the running RMS position error, relative to "
+                               "the normalised size, is below this", Real())
+    n_eval: int = option(20000, "held-out sphere points of the report", Int(1))
+    seed: object = option(0, "random seed of initialisation and sampling",
+                          Any(parse=int), resume=True)
+
+    def resume_key(self):
+        """The options a checkpoint must match; a Generator seed matches any other.
+
+        Examples
+        --------
+        >>> key = FitOptions(seed=3).resume_key()
+        >>> key["seed"], "time_budget" in key           # a resumed fit may get more time
+        (3, False)
+        """
+        key = super().resume_key()
+        key["seed"] = self.seed if _is_int(self.seed) else "generator"
+        return key
+
+
+# ------------------------------------------------------------------------------ flows
+
+#: explicit time schemes of the network flows: name -> ``(a, b)`` of the two-stage
+#: Runge-Kutta step ``y* = y + a h F(y)``, ``y+ = y + h ((1 - b) F(y) + b F(y*))``
+#: (``None``: one stage, forward Euler, the paper's). ``a b = 1/2`` makes both second order.
+SCHEMES = {"heun": (1.0, 0.5), "midpoint": (0.5, 1.0), "euler": None}
+DEFAULT_SCHEME = "heun"
+
+#: the methods of the heat flow, default first: explicit steps of a network, or exact in time
+#: through eigenmodes
+HEAT_METHODS = ("network", "spectral")
+
+#: snapshots after t = 0 of a flow given no snapshot times (``n_snapshots=``)
+DEFAULT_SNAPSHOTS = 10
+
+@dataclass(frozen=True)
+class HeatOptions(Options):
+    """The options of :func:`sns_np.flows.heat_flow` (docs/flows.md measures them).
+
+    The network scheme uses ``width`` to ``growth``, the spectral scheme ``k``, ``n_quad``
+    and ``eigen_options``.
+
+    Examples
+    --------
+    >>> HeatOptions(refit_steps=20).to_dict()["refit_steps"]
+    20
+    >>> HeatOptions(growth=1.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: growth must be > 1, got 1.0
+    """
+
+    _unknown = "unknown option(s) {names} of heat_flow"
+
+    width: int = option(10, "width of the field network (ignored for a NeuralField, which "
+                        "is copied)", Int(1))
+    depth: int = option(2, "residual blocks of the field network", Int(0))
+    n_points: int | None = option(
+        None, "fixed sample points of the network scheme (default: A / (2 pi dt), at the "
+        "stability limit, clipped to [64, 10242])", Int(16))
+    refit_steps: int = option(100, "Adam steps per refit (a time step has one refit with "
+                              "euler, two with heun or midpoint)", Int(0))
+    lr: float = option(1e-3, "learning rate of the refits", Real())
+    init_steps: int = option(2000, "steps of the initial fit of a field that is not a "
+                             "NeuralField", Int(0))
+    growth: float = option(2.0, "divergence when max |f - mean| exceeds this times its "
+                           "initial value", Real())
+    k: int = option(50, "non-constant eigenmodes of the spectral scheme", Int(1))
+    n_quad: int = option(20000, "quadrature nodes of the spectral projection", Int(1))
+    eigen_options: Mapping | None = option(
+        None, "options of sns_np.spectral.eigenmodes for the spectral scheme (a dict)", Any())
+
+    def check(self):
+        """Every option's check, and ``growth > 1`` (a flow whose range may not grow at all
+        would stop at the first rounding error).
+
+        Examples
+        --------
+        >>> HeatOptions(growth=3.0).check()                  # silent when all is well
+        """
+        super().check()
+        if self.growth <= 1.0:
+            raise ValueError(f"growth must be > 1, got {self.growth}")
+        if self.eigen_options is not None and not isinstance(self.eigen_options, Mapping):
+            raise ValueError(f"eigen_options must be a dict of options of "
+                             f"sns_np.spectral.eigenmodes, got {self.eigen_options!r}")
+
+
+@dataclass(frozen=True)
+class MCFOptions(Options):
+    """The options of :func:`sns_np.flows.mean_curvature_flow`: its samples and the refits of
+    the surface network (docs/flows.md measures them).
+
+    Examples
+    --------
+    >>> o = MCFOptions.from_kwargs(refit_steps=10)
+    >>> o.refit_steps, o.lr, o.dtype
+    (10, 0.0001, 'float64')
+    """
+
+    _unknown = "unknown option(s) {names} of mean_curvature_flow"
+
+    n_points: int | None = option(
+        None, "sample points per step (default: A / (4 pi dt), clipped to [64, 10242]: the "
+        "stability limit holds until the area has halved)", Int(16))
+    refit_steps: int = option(100, "optimiser steps per refit (the paper's 'up to 100 "
+                              "epochs'; 0 keeps only the read-out solve; a time step has one "
+                              "refit with euler, two with heun or midpoint)", Int(0))
+    lr: float = option(1e-4, "refit learning rate (Adam, constant)", Real())
+    batch: int | None = option(None, "samples per refit step (default: all points)", Int(1))
+    normal_weight: float = option(0.0, "weight of the normal loss of the refits (the targets' "
+                                  "normals are known only to O(dt))", Real(allow_zero=True))
+    dtype: str = option("float64", "precision of the refits", Choice("float32", "float64"))
+    growth: float = option(1.5, "divergence when the area exceeds this times the initial "
+                           "area", Real())
+    n_eval: int = option(256, "held-out points per refit report", Int(1))
+
+
+# ------------------------------------------------------------------------------ command lines
+
+#: metavars of options whose unit the flag should show
+METAVARS = {"time_budget": "SECONDS"}
+
+
+def _argument_type(name, check):
+    """An argparse type for option ``name``: parse the text, then apply the option's own
+    check, so that a command line refuses what the library refuses, with its message."""
+    what = "an integer" if check.parse is int else "a number"
+
+    def parse(text):
+        try:
+            value = check.parse(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+        try:
+            check(value, name)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+        return value
+    parse.__name__ = check.parse.__name__      # what argparse names in its own messages
+    return parse
+
+
+def add_arguments(parser, options, names, flags=None):
+    """Add one command-line option per field ``names`` of an options dataclass.
+
+    The flag is ``--<name>`` with dashes (or ``flags[name]``); a value is parsed and checked
+    as the option's own check does (same message); the help is the field's, with the
+    dataclass's default. An option left out stays ``None``, so the library applies its
+    default: the command line never writes one down. ``sns-np`` and the examples use it.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser or argument group
+    options : an options dataclass (FitOptions, HeatOptions, MCFOptions)
+    names : sequence of str, the fields to offer, in help order
+    flags : dict, optional, ``{name: flag}`` for flags that differ from the name
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(prog="fit")
+    >>> add_arguments(p, FitOptions, ["width", "time_budget", "optimizer"])
+    >>> args = p.parse_args(["--width", "64"])
+    >>> args.width, args.time_budget, given_arguments(args, ["width", "time_budget"])
+    (64, None, {'width': 64})
+    >>> "network width (default: 256)" in " ".join(p.format_help().split())
+    True
+    """
+    flags = flags or {}
+    for name in names:
+        f = options.field(name)
+        check = f.metadata["check"]
+        text = f.metadata["help"] + ("" if f.default is None else f" (default: {f.default})")
+        flag = flags.get(name, "--" + name.replace("_", "-"))
+        kwargs = {"dest": name, "help": text.replace("%", "%%")}
+        if isinstance(check, Choice):
+            kwargs["choices"] = check.values
+        else:
+            kwargs["type"] = _argument_type(name, check)
+            kwargs["metavar"] = METAVARS.get(name, flag.lstrip("-").replace("-", "_").upper())
+        parser.add_argument(flag, **kwargs)
+
+
+def given_arguments(args, names):
+    """The options among ``names`` given on a parsed command line, as keyword arguments
+    (those left out are not passed, so they keep the library's defaults).
+
+    Examples
+    --------
+    >>> given_arguments(argparse.Namespace(steps=5, lr=None), ["steps", "lr", "batch"])
+    {'steps': 5}
+    """
+    return {k: getattr(args, k) for k in names if getattr(args, k, None) is not None}
