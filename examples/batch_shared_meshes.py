@@ -14,7 +14,7 @@ outcome.
 Run (from the project root; needs pip install "sns-np[distributed,plots]"):
 
     python examples/batch_shared_meshes.py                     # default fits: ~10 min each
-    python examples/batch_shared_meshes.py --time-budget 180   # what docs/batch.md reports
+    python examples/batch_shared_meshes.py --steps 4000 --max-degree 56  # docs/batch.md
     python examples/batch_shared_meshes.py --scheduler tcp://host:8786
 
 The fits take the library's defaults (sns_np.surface.FitOptions) unless options are given;
