@@ -32,9 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _npz
+from ._npz import load_npz, save_npz
 from ._validation import as_points, check_order, check_positive_float, check_positive_int
 from .errors import ModelFileError, ShapeError
-from .nn.mlp import SMALL_WIDTH, ResidualMLP, load_npz, save_npz
+from .nn.mlp import SMALL_WIDTH, ResidualMLP
 from .sampling import SurfaceSample
 
 __all__ = ["NeuralField", "EigenLoss", "eigen_loss", "rayleigh_loss", "orthogonality_loss",

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .._atomic import exclusive, remove_stale_temporaries
+from .._npz import load_npz, save_npz
 from .._progress import Progress
 from .._signals import deferred_signals
 from .._validation import (
@@ -36,7 +37,7 @@ from .._validation import (
 )
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
-from ..nn.mlp import ResidualMLP, load_npz, save_npz
+from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule, make_optimizer
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
