@@ -164,14 +164,6 @@ def default_points(area, dt, lo=64, hi=10242):
     return int(min(hi, max(lo, math.floor(area / (2.0 * math.pi * dt)))))
 
 
-def lstsq_readout(features, residual, rel_reg=1e-10):
-    """``delta`` (width, k) minimising ``|features delta - residual|^2`` (+ a tiny ridge)."""
-    H = np.asarray(features, dtype=np.float64)
-    G = H.T @ H
-    G[np.diag_indices_from(G)] += rel_reg * max(np.trace(G) / G.shape[0], 1e-300)
-    return np.linalg.solve(G, H.T @ np.asarray(residual, dtype=np.float64))
-
-
 def surface_readout(net, p, q):
     """Set the read-out layer of a surface network to the least-squares fit of ``q`` at ``p``.
 
@@ -179,16 +171,7 @@ def surface_readout(net, p, q):
     Gauss-Newton step in the last layer; a uniform scaling of the output (a shrinking sphere)
     is captured exactly.
     """
-    H = net.features(p).astype(np.float64)
-    if net.bias:
-        H = np.hstack([H, np.ones((H.shape[0], 1))])
-    y = H[:, :net.width] @ net.W3.T.astype(np.float64)
-    if net.bias:
-        y = y + net.b3
-    d = lstsq_readout(H, q - y)
-    net.W3[...] += d[:net.width].T
-    if net.bias:
-        net.b3[...] += d[net.width]
+    net.fit_readout(p, q, increment=True)
 
 
 def atomic_folder(out, write, overwrite=False):
