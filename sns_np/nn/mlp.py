@@ -43,7 +43,7 @@ from .._validation import (
     check_positive_int,
 )
 from ..errors import ShapeError
-from . import _engine, _format, _layout
+from . import _engine, _format, _layout, _readout
 from ._engine import SMALL_WIDTH, n_streams  # noqa: F401  (SMALL_WIDTH: used by fields.py)
 from ._format import FORMAT, FORMAT_VERSION  # noqa: F401  (the file format's name, version)
 
@@ -494,7 +494,7 @@ class ResidualMLP:
         True
         """
         x = self._check_x(x)
-        n, w, o = x.shape[0], self.width, self.out_dim
+        n, o = x.shape[0], self.out_dim
         target = as_float_array(target, "target")
         if target.shape not in ((n, o), (n,)):
             raise ShapeError(f"target must have shape ({n}, {o}) or ({n},), got {target.shape}")
@@ -506,22 +506,11 @@ class ResidualMLP:
         scale = float(scale)
         if not np.isfinite(scale) or scale == 0.0:
             raise ValueError(f"scale must be finite and non-zero, got {scale}")
-        feats = self.features(x).astype(np.float64)
-        if self.bias:
-            feats = np.hstack([feats, np.ones((n, 1))])
-        if not increment:
-            rhs = target
-        elif current is not None:
+        if current is not None:
             current = as_float_array(current, "current")
-            if current.shape != target.shape:
-                raise ShapeError(f"current must have the shape of target, {target.shape}, got "
-                                 f"{current.shape}")
-            rhs = target - current
-        else:
-            y = feats[:, :w] @ self.W3.T.astype(np.float64)
-            if self.bias:
-                y = y + self.b3
-            rhs = target - (scale / o * y.sum(axis=1) if scalar else y)
+            if not increment or current.shape != target.shape:
+                raise ShapeError(f"current (with increment=True only) must have the shape of "
+                                 f"target, {target.shape}, got {current.shape}")
         if weights is not None:
             weights = as_float_array(weights, "weights")
             if weights.shape != (n,):
@@ -529,28 +518,7 @@ class ResidualMLP:
             check_finite(weights, "weights")
             if np.any(weights < 0):
                 raise ValueError("weights must be non-negative")
-            sw = np.sqrt(weights)
-            feats, rhs = feats * sw[:, None], rhs * (sw[:, None] if rhs.ndim == 2 else sw)
-        G = feats.T @ feats
-        G[np.diag_indices_from(G)] += rel_reg * max(np.trace(G) / G.shape[0], 1e-300)
-        T = np.linalg.solve(G, feats.T @ np.asarray(rhs, dtype=np.float64))
-        if scalar:
-            T = T / scale
-        if not np.all(np.isfinite(T)):
-            return T
-        if scalar:       # the same change in every output: g changes by scale * h . T
-            self.W3[...] += T[:w]
-            if self.bias:
-                self.b3[...] += T[w]
-        elif increment:
-            self.W3[...] += T[:w].T
-            if self.bias:
-                self.b3[...] += T[w]
-        else:
-            self.W3[...] = T[:w].T
-            if self.bias:
-                self.b3[...] = T[w]
-        return T
+        return _readout.fit(self, x, target, weights, rel_reg, increment, scale, current)
 
     # ------------------------------------------------------------------ reverse mode
     def vjp(self, x, dy, dJ=None, directions=None):
