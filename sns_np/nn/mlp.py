@@ -88,7 +88,8 @@ class ResidualMLP:
       over all blocks and the depth does not inflate the signal.
     * ``W3``: std ``1e-2 / sqrt(width)``: the map starts near a point, like the reference
       (whose last layer is the constant 1e-4), but with random directions. Fitting
-      (:mod:`sns_np.surface`) replaces it by a least-squares fit of the initial features.
+      (:mod:`sns_np.surface`) replaces it by a least-squares fit of the initial features
+      (:meth:`fit_readout`).
     * biases: zero.
 
     Examples
