@@ -35,7 +35,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 import _torch_reference as tref  # noqa: E402
 
-from sns_np.nn import ResidualMLP, _parallel  # noqa: E402
+from sns_np.nn import ResidualMLP, _engine, _parallel  # noqa: E402
 from sns_np.surface.losses import position_normal_loss  # noqa: E402
 
 
@@ -138,7 +138,7 @@ def main(argv=None):
         # shape, where operands stay in cache (faster in float32: a stricter reference)
         rows = n_jet * 10
         t_big = matmul_products_time(net, rows, dtype, repeats)
-        c = net._chunk(10) * 10
+        c = _engine.chunk_points(net, 10) * 10
         t_chunked = matmul_products_time(net, c, dtype, repeats) * rows / c
         flops = 2 * net.depth * 2 * rows * 256 * 256
         print(f"matrix-product rate (x 256 x 256): {flops / t_big / 1e9:.1f} GFLOP/s with "

@@ -1,4 +1,5 @@
-"""Reading .npz model files at a cost bounded by the file's honest size.
+"""Reading .npz model files at a cost bounded by the file's honest size, and writing them
+atomically (:func:`save_npz`).
 
 An .npz file is a zip archive of .npy arrays. ``numpy.load`` allocates each array from the
 shape its header declares before reading a byte of data, and a zip member may unpack to far
@@ -29,6 +30,7 @@ from pathlib import Path
 import numpy as np
 from numpy.lib import format as npy_format
 
+from ._atomic import write_file
 from .errors import ModelFileError
 
 #: an archive with more members than this is not a model file
@@ -39,6 +41,23 @@ SLACK_BYTES = 64 << 20
 #: nesting depth allowed in JSON metadata
 MAX_JSON_DEPTH = 64
 _CHUNK = 1 << 22
+
+
+def save_npz(path, arrays: dict) -> Path:
+    """Write ``arrays`` to ``path`` (.npz) through a temporary file, fsync and an atomic rename.
+
+    The file gets the permissions of the user's umask, and the data is on disk before the
+    rename (:func:`sns_np._atomic.write_file`): ``path`` is either untouched or complete.
+    """
+    path = Path(path)
+    if path.suffix.lower() != ".npz":
+        raise ValueError(f"model files must end in .npz, got {path.name!r}")
+
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+
+    return write_file(path, write)
 
 
 class load_npz:

@@ -14,9 +14,10 @@ from __future__ import annotations
 import numpy as np
 
 from . import _npz
+from ._npz import load_npz, save_npz
 from ._validation import as_points, check_order, check_positive_int
 from .errors import ModelFileError
-from .nn.mlp import ResidualMLP, load_npz, save_npz
+from .nn.mlp import ResidualMLP
 
 __all__ = ["NeuralField"]
 

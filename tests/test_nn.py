@@ -285,3 +285,99 @@ def test_large_input_is_chunked_and_bounded():
     y = net.jet(x, 0)
     assert y.shape == (1_000_000, 3) and np.all(np.isfinite(y))
     assert np.allclose(y[-5:], net.jet(x[-5:], 0), rtol=1e-13)
+
+
+def _features_by_hand(net, x):
+    """The hidden features recomputed from the parameters: plain NumPy, logaddexp softplus."""
+    sp = lambda z: np.logaddexp(0.0, z)
+    h = sp(x @ net.W0.T + (net.b0 if net.bias else 0.0))
+    for blk in range(net.depth):
+        a = sp(h @ net.W1[blk].T + (net.b1[blk] if net.bias else 0.0))
+        h = sp(h + a @ net.W2[blk].T + (net.b2[blk] if net.bias else 0.0))
+    return h
+
+
+@pytest.mark.parametrize("width, depth, bias", [(12, 3, True), (48, 2, False), (40, 1, True)])
+@pytest.mark.parametrize("dtype, rtol", [(np.float64, 1e-12), (np.float32, 2e-5)])
+def test_features_match_a_numpy_recomputation(width, depth, bias, dtype, rtol):
+    net = make_net(width, depth, bias, seed=3).astype(dtype)
+    x = np.random.default_rng(4).standard_normal((300, 3))
+    h = net.features(x, chunk_size=77)                   # several chunks, one partial
+    assert h.shape == (300, width) and h.dtype == np.dtype(dtype)
+    ref = _features_by_hand(net.astype(np.float64), x)
+    np.testing.assert_allclose(h, ref, rtol=rtol, atol=rtol * np.abs(ref).max())
+    # the read-out of the features is the network's value (small-width kernel or BLAS path)
+    y = h.astype(np.float64) @ net.W3.T.astype(np.float64) + (net.b3 if bias else 0.0)
+    np.testing.assert_allclose(net(x), y, rtol=10 * rtol, atol=10 * rtol * np.abs(y).max())
+
+
+@pytest.mark.parametrize("width, bias", [(12, True), (40, False)])
+def test_fit_readout_recovers_an_exact_read_out(width, bias):
+    net = make_net(width, 2, bias, seed=5)
+    x = np.random.default_rng(6).standard_normal((400, 3))
+    g = np.random.default_rng(7)
+    W, b = g.standard_normal((3, width)), g.standard_normal(3) if bias else np.zeros(3)
+    target = net.features(x) @ W.T + b
+    T = net.fit_readout(x, target, rel_reg=0.0)
+    assert T.shape == (width + bias, 3)
+    np.testing.assert_allclose(net.W3, W, atol=1e-6)
+    np.testing.assert_allclose(net(x), target, atol=1e-8)
+    if bias:
+        np.testing.assert_allclose(net.b3, b, atol=1e-6)
+    # fitted already: an increment changes (almost) nothing
+    before = net.pack()
+    d = net.fit_readout(x, target, increment=True)
+    assert np.abs(d).max() < 1e-6
+    np.testing.assert_allclose(net.pack(), before, atol=1e-6)
+
+
+def test_fit_readout_increment_replace_weights_and_scalar():
+    net = make_net(16, 2, True, seed=8)
+    x = np.random.default_rng(9).standard_normal((300, 3))
+    target = np.sin(x) + 0.1 * x ** 2
+    # without a ridge, replacing and incrementing reach the same least-squares read-out
+    a, b = net.copy(), net.copy()
+    a.fit_readout(x, target, rel_reg=0.0)
+    b.fit_readout(x, target, rel_reg=0.0, increment=True)
+    np.testing.assert_allclose(a(x), b(x), atol=1e-8)
+    # zero weights drop points: the same fit as on the others alone
+    w = np.r_[np.ones(200), np.zeros(100)]
+    c, d = net.copy(), net.copy()
+    c.fit_readout(x, target + np.r_[np.zeros((200, 3)), 9.0 * np.ones((100, 3))], weights=w)
+    d.fit_readout(x[:200], target[:200])
+    np.testing.assert_allclose(c.theta, d.theta, atol=1e-8)
+    # the only parameters changed are W3 and b3
+    sl = net.param_slices()
+    changed = [k for k, (s, _) in sl.items() if not np.array_equal(c.theta[s], net.theta[s])]
+    assert changed == ["W3", "b3"]
+    # a scalar read-out g = scale * mean(y): one common change to every output row
+    scale = 0.7
+    e = np.random.default_rng(10).standard_normal(17)
+    g0 = scale * net(x).mean(axis=1)
+    goal = g0 + scale * (np.hstack([net.features(x), np.ones((300, 1))]) @ e)
+    s = net.copy()
+    T = s.fit_readout(x, goal, increment=True, scale=scale, rel_reg=0.0)
+    np.testing.assert_allclose(T, e, atol=1e-6)
+    np.testing.assert_allclose(scale * s(x).mean(axis=1), goal, atol=1e-8)
+    np.testing.assert_allclose(s.W3 - net.W3, np.tile(e[:16], (3, 1)), atol=1e-6)
+    same = net.copy()
+    same.fit_readout(x, goal, increment=True, scale=scale, rel_reg=0.0, current=g0)
+    np.testing.assert_allclose(same.theta, s.theta, atol=1e-9)
+
+
+def test_fit_readout_rejects_bad_input_and_keeps_a_non_finite_fit_out():
+    net = make_net(12, 1, False)
+    x = np.random.default_rng(11).standard_normal((50, 3))
+    with pytest.raises(ShapeError, match="target"):
+        net.fit_readout(x, np.zeros((50, 2)))
+    with pytest.raises(ValueError, match="increment=True"):
+        net.fit_readout(x, np.zeros(50))
+    with pytest.raises(ShapeError, match="weights"):
+        net.fit_readout(x, np.zeros((50, 3)), weights=np.ones(49))
+    with pytest.raises(ValueError, match="non-negative"):
+        net.fit_readout(x, np.zeros((50, 3)), weights=-np.ones(50))
+    with pytest.raises(ShapeError, match="current"):
+        net.fit_readout(x, np.zeros(50), increment=True, current=np.zeros((50, 3)))
+    before = net.pack()
+    T = net.fit_readout(x, np.full((50, 3), np.nan))
+    assert not np.all(np.isfinite(T)) and np.array_equal(net.pack(), before)

@@ -1,5 +1,6 @@
 """Shared pieces of the flows (private): time grids, sample points, the stability limit
-and atomic output folders (the least-squares read-outs live in :mod:`sns_np.surface.readout`)."""
+and atomic output folders (the least-squares read-out is
+:meth:`sns_np.nn.ResidualMLP.fit_readout`)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ from .._atomic import write_folder
 from .._validation import check_choice, check_positive_float
 from ..options import DEFAULT_SCHEME, DEFAULT_SNAPSHOTS, SCHEMES
 from ..sampling import fibonacci_sphere
-from ..surface.readout import lstsq_readout, surface_readout  # noqa: F401 (used by the flows)
 
 STABILITY_MODES = ("warn", "raise", "ignore")
 

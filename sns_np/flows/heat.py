@@ -65,7 +65,6 @@ from ._common import (
     check_stability,
     check_times,
     default_points,
-    lstsq_readout,
     substeps,
 )
 
@@ -392,17 +391,9 @@ def _refit(f, sample, target, steps, opt):
         if not (np.isfinite(loss) and np.all(np.isfinite(grad))):
             return math.inf
         opt.step(net.theta, grad)
-    H = net.features(p)
-    if net.bias:
-        H = np.hstack([H, np.ones((H.shape[0], 1))])
-    r = target - f(p)
-    sw = np.sqrt(w)
-    d = lstsq_readout(H * sw[:, None], r * sw) / f.scale
+    d = net.fit_readout(p, target, weights=w, increment=True, scale=f.scale, current=f(p))
     if not np.all(np.isfinite(d)):
         return math.inf
-    net.W3[...] += d[:net.width]
-    if net.bias:
-        net.b3[...] += d[net.width]
     r = target - f(p)
     return float(w @ (r * r))
 

@@ -69,7 +69,6 @@ from ._common import (
     stability_limit,
     step_points,
     substeps,
-    surface_readout,
 )
 
 __all__ = ["mean_curvature_flow", "MeanCurvatureFlowResult", "MCFOptions", "MCF_DEFAULTS"]
@@ -323,7 +322,7 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
         """``start``'s network refitted to ``q`` at ``p`` (targets of the step from ``S``)."""
         target = _StepTarget(S, p, q, normals, [(u, c) for u, c in stage_terms if c != 0.0])
         net = start.net.copy()
-        surface_readout(net, p, target.q)
+        net.fit_readout(p, target.q, increment=True)
         if refit_steps:
             try:
                 with warnings.catch_warnings():
@@ -338,7 +337,7 @@ def mean_curvature_flow(surface, t_end, dt, *, scheme: str = DEFAULT_SCHEME, tim
             net = S_new.net
         if not np.all(np.isfinite(net.theta)):
             raise diverged("the refit produced non-finite parameters")
-        surface_readout(net, p, target.q)
+        net.fit_readout(p, target.q, increment=True)
         S_next = SphericalNeuralSurface(net, S.center, S.scale, metadata=dict(S.metadata))
         r = S_next.jet(p, 0) - q
         rms = float(np.sqrt(np.mean(np.einsum("ij,ij->i", r, r))))

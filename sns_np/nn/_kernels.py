@@ -1,7 +1,7 @@
 """Numba kernels of the derivative engine (private).
 
 Plain functions of arrays and scalars: no validation, no classes (the Python layer in
-:mod:`sns_np.nn.mlp` validates, allocates and picks the kernel). Every kernel writes into
+:mod:`sns_np.nn._engine` allocates and picks the kernel). Every kernel writes into
 preallocated arrays. The fused jet rules exist twice over one row-range body
 (``_softplus_jet_rows``, ``_softplus_jet_back_rows``): threaded (``prange`` over blocks of
 points) for the threaded path, and serial without the GIL (``*_serial``, Python shims that
@@ -35,16 +35,10 @@ exp(-708) ~ 3e-308 (an absolute error below 1e-307 on softplus and sigmoid).
 from __future__ import annotations
 
 import os
+import threading
 
-# Numba's OpenMP workers and OpenBLAS's threads both spin-wait after a parallel region. The
-# engine alternates BLAS products with Numba passes dozens of times per chunk, and with both
-# pools spinning on 2 cores each pass waits for the other's spinners: measured 8.2 ms instead
-# of 1.6 ms per product + pass. A passive OpenMP wait policy removes that. It must be set
-# before Numba loads its OpenMP layer (at the first parallel launch); a user's own setting wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
-import numpy as np  # noqa: E402
-from numba import njit, prange  # noqa: E402
+import numpy as np
+from numba import njit, prange
 
 _LOG2E = 1.4426950408889634
 _LN2_HI = 0.6931471803691238
@@ -65,6 +59,42 @@ _NBLK = 64
 #: (below 1.2e-38, z < -87) into the matrix products, which run 1.4x slower on them
 #: (docs/performance.md).
 _FLUSH_Z = 69.0
+
+
+_start_lock = threading.Lock()
+_started = False
+
+
+def start_threads():
+    """Start Numba's thread pool, once, with a passive OpenMP wait policy.
+
+    Numba's OpenMP workers and OpenBLAS's threads both spin-wait after a parallel region. The
+    threaded path alternates BLAS products with Numba passes dozens of times per chunk, and
+    with both pools spinning on 2 cores each pass waits for the other's spinners: measured
+    8.2 ms instead of 1.6 ms per product + pass. A passive OpenMP wait policy removes that.
+    The OpenMP runtime reads ``OMP_WAIT_POLICY`` once, when Numba loads it to start its pool;
+    so the variable is set for that moment only and removed again, and the process
+    environment (which child processes inherit) is left as it was. A user's own setting wins,
+    and a pool that was started before keeps whatever policy it started with. Called by the
+    engine before its first threaded kernel; importing this module changes nothing.
+    """
+    global _started
+    if _started:
+        return
+    import numba
+
+    with _start_lock:
+        if _started:
+            return
+        ours = "OMP_WAIT_POLICY" not in os.environ
+        if ours:
+            os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
+        try:
+            numba.get_num_threads()  # launches the threading layer (loads OpenMP)
+        finally:
+            if ours:
+                os.environ.pop("OMP_WAIT_POLICY", None)
+        _started = True
 
 
 @njit(inline="always", **_JIT)
@@ -371,8 +401,8 @@ def small_vjp(x, D, W0, b0, W1, b1, W2, b2, W3, b3, has_bias, m, Ybar,
     for t in prange(nblk):
         lo = (n * t) // nblk
         hi = (n * (t + 1)) // nblk
-        # tape: block inputs h, inner pre-activations u, inner activations a, outer pre-acts z
-        H = np.empty((depth + 1, S, w))
+        # tape: block inputs hid, inner pre-activations u, inner activations a, outer pre-acts z
+        hid = np.empty((depth + 1, S, w))
         U = np.empty((depth, S, w))
         A = np.empty((depth, S, w))
         Zt = np.empty((depth, S, w))
@@ -394,24 +424,24 @@ def small_vjp(x, D, W0, b0, W1, b1, W2, b2, W3, b3, has_bias, m, Ybar,
                     for j in range(d):
                         acc += W0[r, j] * D[i, j, c]
                     Z0[1 + c, r] = acc
-            _small_act(Z0, H[0], SG0, s2, m, 0)
+            _small_act(Z0, hid[0], SG0, s2, m, 0)
             for blk in range(depth):
-                _small_linear(H[blk], W1[blk], b1[blk], U[blk], has_bias)
+                _small_linear(hid[blk], W1[blk], b1[blk], U[blk], has_bias)
                 _small_act(U[blk], A[blk], SGU[blk], s2, m, 0)
                 _small_linear(A[blk], W2[blk], b2[blk], Zt[blk], has_bias)
                 for s in range(S):
                     for j in range(w):
-                        Zt[blk, s, j] += H[blk, s, j]
-                _small_act(Zt[blk], H[blk + 1], SGZ[blk], s2, m, 0)
+                        Zt[blk, s, j] += hid[blk, s, j]
+                _small_act(Zt[blk], hid[blk + 1], SGZ[blk], s2, m, 0)
             # backward
-            _small_linear_back(Ybar[i], H[depth], W3, gW3[t], gb3[t], hbar, has_bias, False)
+            _small_linear_back(Ybar[i], hid[depth], W3, gW3[t], gb3[t], hbar, has_bias, False)
             for blk in range(depth - 1, -1, -1):
                 _small_act_back(Zt[blk], SGZ[blk], hbar, hbar, m)       # hbar := zbar
                 _small_linear_back(hbar, A[blk], W2[blk], gW2[t, blk], gb2[t, blk], abar,
                                    has_bias, False)
                 _small_act_back(U[blk], SGU[blk], abar, abar, m)        # abar := ubar
                 # residual: hbar (= zbar) keeps flowing, plus W1^T ubar
-                _small_linear_back(abar, H[blk], W1[blk], gW1[t, blk], gb1[t, blk], hbar,
+                _small_linear_back(abar, hid[blk], W1[blk], gW1[t, blk], gb1[t, blk], hbar,
                                    has_bias, True)
             _small_act_back(Z0, SG0, hbar, hbar, m)
             for s in range(S):

@@ -13,14 +13,17 @@ cache.
 
 How
 ---
-* The worker count is OpenBLAS's thread count when the call starts: it follows
-  ``OPENBLAS_NUM_THREADS`` and any runtime limit the caller set (threadpoolctl, say).
-* For the duration of the call every OpenBLAS loaded in the process is set to one thread (by
-  its ``*_set_num_threads`` entry point, found with ctypes), then restored. A lock keeps two
-  parallel sections from interleaving those settings; code running inside a worker (a loss
-  function calling the network, say) runs serially and never waits for that lock.
-* Where no OpenBLAS can be found (Accelerate, MKL, a BLAS without that entry point), or it
-  has one thread, :func:`plan` returns ``None`` and the engine keeps its threaded-BLAS path.
+* BLAS threads are controlled through threadpoolctl: one ``ThreadpoolController``, created
+  on first use, finds the BLAS libraries loaded in the process (OpenBLAS, MKL, BLIS, ...).
+* The worker count is the thread count of NumPy's BLAS when the call starts: it follows
+  ``OPENBLAS_NUM_THREADS`` and any runtime limit the caller set (``threadpool_limits``, say).
+* For the duration of the call every BLAS is limited to one thread
+  (``ThreadpoolController.limit``, 0.03 ms a call against 100 ms and more of work), then
+  restored. A lock keeps two parallel sections from interleaving those settings; code running
+  inside a worker (a loss function calling the network, say) runs serially and never waits for
+  that lock.
+* Where NumPy's BLAS cannot be controlled (Accelerate), or it has one thread, :func:`plan`
+  returns ``None`` and the engine keeps its threaded-BLAS path.
 
 The calling thread is one of the workers; the others live in a pool created on first use and
 re-created after ``fork``.
@@ -28,97 +31,66 @@ re-created after ``fork``.
 
 from __future__ import annotations
 
-import ctypes
 import os
-import sys
 import threading
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
-
-_SET_NAMES = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-              "openblas_set_num_threads64_", "openblas_set_num_threads")
 
 
-class _OpenBLAS:
-    """Get/set the thread count of one loaded OpenBLAS through its C entry points."""
+class _Blas:
+    """The thread count of one BLAS library (a threadpoolctl library controller)."""
 
-    def __init__(self, lib, set_name):
-        self.path = lib._name
-        self._set = getattr(lib, set_name)
-        self._set.argtypes = [ctypes.c_int]
-        self._set.restype = None
-        self._get = getattr(lib, set_name.replace("set_num", "get_num"))
-        self._get.argtypes = []
-        self._get.restype = ctypes.c_int
+    def __init__(self, controller):
+        self.controller = controller
+        self.path = controller.filepath
 
     def get(self) -> int:
-        return int(self._get())
+        return int(self.controller.num_threads)
 
     def set(self, n: int) -> None:
-        self._set(int(n))
+        self.controller.set_num_threads(int(n))
 
 
-def _loaded_openblas_paths():
-    """Shared libraries of this process whose file name contains 'openblas' (Linux only)."""
-    try:
-        with open("/proc/self/maps") as f:
-            lines = f.read().splitlines()
-    except OSError:
-        return []
-    paths = []
-    for line in lines:
-        parts = line.split(None, 5)
-        if len(parts) == 6 and "openblas" in os.path.basename(parts[5]).lower():
-            path = parts[5].strip()
-            if path not in paths and os.path.exists(path):
-                paths.append(path)
-    return paths
+def _numpy_blas_first(libs):
+    """The BLAS libraries with NumPy's first (its thread count sets the number of workers);
+    none when NumPy's BLAS is not among them (only then may the others be trusted).
 
-
-def _numpy_blas_is_openblas(found):
-    """Whether NumPy's products run on an OpenBLAS (only then may it be controlled).
-
-    NumPy >= 1.26 names its BLAS in its build configuration; older ones are trusted only when
-    an OpenBLAS lies inside NumPy's own installation (a wheel's ``numpy.libs``).
+    NumPy >= 1.26 names its BLAS in its build configuration; older ones are recognised by a
+    library inside NumPy's own installation (a wheel's ``numpy.libs``).
     """
     import numpy
 
     try:
-        name = numpy.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"]
+        name = str(numpy.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"])
     except Exception:  # noqa: BLE001 (NumPy < 1.26, or a layout we do not know)
-        return any("numpy" in lib.path for lib in found)
-    return "openblas" in str(name).lower()
-
-
-def _find_openblas():
-    import numpy  # noqa: F401  (loads NumPy's BLAS, if it has not been loaded yet)
-
-    found = []
-    for path in _loaded_openblas_paths():
-        try:
-            lib = ctypes.CDLL(path)  # already loaded: returns the loaded copy
-        except OSError:
-            continue
-        for name in _SET_NAMES:
-            if hasattr(lib, name) and hasattr(lib, name.replace("set_num", "get_num")):
-                found.append(_OpenBLAS(lib, name))
-                break
-    if not _numpy_blas_is_openblas(found):
-        return []  # MKL, Accelerate, ...: an OpenBLAS of SciPy's would be the wrong one
-    # NumPy's own first: its thread count decides the number of workers
-    found.sort(key=lambda lib: "numpy" not in lib.path)
-    return found
+        name = ""
+    ours = [lib for lib in libs if "numpy" in lib.path
+            or (name and lib.controller.internal_api in name.lower())]
+    if not ours:
+        return []
+    ours.sort(key=lambda lib: "numpy" not in lib.path)
+    return ours + [lib for lib in libs if lib not in ours]
 
 
 _lock = threading.Lock()
 _local = threading.local()
-_state = {"blas": None, "pool": None, "pool_size": 0}
+_state = {"controller": None, "blas": None, "pool": None, "pool_size": 0}
 _enabled = os.environ.get("SNS_NP_DATA_PARALLEL", "1") != "0"
 
 
+def _controller():
+    """The process's threadpoolctl controller of the BLAS libraries (created once, lazily)."""
+    if _state["controller"] is None:
+        import numpy  # noqa: F401  (loads NumPy's BLAS, if it has not been loaded yet)
+        from threadpoolctl import ThreadpoolController
+
+        _state["controller"] = ThreadpoolController().select(user_api="blas")
+    return _state["controller"]
+
+
 def _blas():
+    """The controllable BLAS libraries, NumPy's first; [] when NumPy's is not one of them."""
     if _state["blas"] is None:
-        _state["blas"] = _find_openblas() if sys.platform.startswith("linux") else []
+        _state["blas"] = _numpy_blas_first([_Blas(c) for c in _controller().lib_controllers])
     return _state["blas"]
 
 
@@ -175,19 +147,6 @@ def _pool(size):
     return _state["pool"]
 
 
-@contextmanager
-def _single_threaded_blas():
-    libs = _blas()
-    before = [lib.get() for lib in libs]
-    for lib in libs:
-        lib.set(1)
-    try:
-        yield
-    finally:
-        for lib, n in zip(libs, before):
-            lib.set(n)
-
-
 def _as_worker(fn, *args):
     before = inside_worker()
     _local.active = True
@@ -200,14 +159,14 @@ def _as_worker(fn, *args):
 def run(work, n_workers: int, queue: TaskQueue | None = None):
     """Call ``work(i)`` for i in range(n_workers), concurrently; the results in order.
 
-    With n_workers == 1 it is a plain call in this thread. Otherwise every OpenBLAS runs
+    With n_workers == 1 it is a plain call in this thread. Otherwise every BLAS runs
     single-threaded until all workers have finished. When one raises (or the caller is
     interrupted), ``queue`` is closed so that the others stop after their current task, and
     the first exception is re-raised once they are done.
     """
     if n_workers <= 1:
         return [_as_worker(work, 0)]
-    with _lock, _single_threaded_blas():
+    with _lock, _controller().limit(limits=1, user_api="blas"):
         pool = _pool(n_workers - 1)
         futures = [pool.submit(_as_worker, work, i) for i in range(1, n_workers)]
         results, errors = [None] * n_workers, []

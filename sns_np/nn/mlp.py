@@ -18,22 +18,22 @@ Reverse mode (``vjp``, ``value_and_grad``) differentiates a loss that depends on
 the first derivatives (position and normal losses, Rayleigh quotients) with respect to all
 parameters, by running the first-order forward-mode computation backwards.
 
-All parameters live in one flat vector ``theta``; the weight matrices are views into it, so
-``pack``/``unpack`` connect directly to ``scipy.optimize`` and the optimisers of
-:mod:`sns_np.nn.optim`.
+This class validates and delegates. Where each part lives:
+
+* :mod:`sns_np.nn._engine`: the forward and reverse passes (BLAS/chunked and small-width Numba
+  paths), plain functions of the network's parameters;
+* :mod:`sns_np.nn._layout`: the parameter layout in the flat vector ``theta`` (the weight
+  matrices are views into it) and the initialisation;
+* :mod:`sns_np.nn._format`: the file format (``state``, ``from_state``, ``save``, ``load``);
+* :mod:`sns_np.nn._parallel` and :mod:`sns_np.nn._kernels`: threads and Numba kernels.
 """
 
 from __future__ import annotations
 
-import math
-import threading
 from pathlib import Path
 
 import numpy as np
 
-from .. import _npz
-from .._atomic import write_file
-from .._npz import load_npz
 from .._validation import (
     as_float_array,
     as_generator,
@@ -42,37 +42,12 @@ from .._validation import (
     check_positive_float,
     check_positive_int,
 )
-from ..errors import ModelFileError, ShapeError
-from . import _kernels as K
-from . import _parallel
+from ..errors import ShapeError
+from . import _engine, _format, _layout, _readout
+from ._engine import SMALL_WIDTH, n_streams
+from ._format import FORMAT, FORMAT_VERSION  # noqa: F401  (the file format's name, version)
 
-__all__ = ["ResidualMLP", "n_streams", "load_npz", "save_npz"]
-
-FORMAT = "sns_np.ResidualMLP"
-FORMAT_VERSION = 1
-
-#: widths up to this use the per-point Numba kernels instead of BLAS
-SMALL_WIDTH = 32
-
-#: rows (points x streams) per chunk on the BLAS path: 2 MB per activation buffer at width 256
-#: in float64. Measured for the full jet and the training step with one worker per core
-#: (docs/performance.md): 512 to 1536 rows are within noise, 4096 rows lose 10-20%.
-_ROWS_PER_CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
-
-
-def n_streams(m: int, k: int) -> int:
-    """Number of streams: the value, m first-order and k (k + 1) / 2 second-order ones.
-
-    Examples
-    --------
-    >>> n_streams(3, 0), n_streams(3, 3), n_streams(3, 2)         # value+J, +D2, geometry's 7
-    (4, 10, 7)
-    """
-    return 1 + m + k * (k + 1) // 2
-
-
-def _pairs(k):
-    return [(a, b) for a in range(k) for b in range(a, k)]
+__all__ = ["ResidualMLP", "n_streams"]
 
 
 class ResidualMLP:
@@ -113,7 +88,8 @@ class ResidualMLP:
       over all blocks and the depth does not inflate the signal.
     * ``W3``: std ``1e-2 / sqrt(width)``: the map starts near a point, like the reference
       (whose last layer is the constant 1e-4), but with random directions. Fitting
-      (:mod:`sns_np.surface`) replaces it by a least-squares fit of the initial features.
+      (:mod:`sns_np.surface`) replaces it by a least-squares fit of the initial features
+      (:meth:`fit_readout`).
     * biases: zero.
 
     Examples
@@ -145,7 +121,8 @@ class ResidualMLP:
         self.chunk_size = None if chunk_size is None else check_positive_int(chunk_size,
                                                                               "chunk_size")
         self.input_scale = check_positive_float(input_scale, "input_scale")
-        self._build_layout()
+        self._shapes, self._offsets, self.n_params = _layout.layout(
+            self.in_dim, self.out_dim, self.width, self.depth, self.bias)
         self._theta = np.zeros(self.n_params, dtype=self.dtype)
         self._bind_views(self._theta)
 
@@ -171,8 +148,8 @@ class ResidualMLP:
     def count_params(in_dim, out_dim, width, depth, bias=False) -> int:
         """Number of parameters of an architecture, in exact integer arithmetic.
 
-        ``w d + 2 L w^2 + o w`` plus ``w + 2 L w + o`` biases (d = in_dim, o = out_dim,
-        w = width, L = depth); for the reference network (3, 3, 256, 8): 1,050,112.
+        ``w d + 2 depth w^2 + o w`` plus ``w + 2 depth w + o`` biases (d = in_dim,
+        o = out_dim, w = width); for the reference network (3, 3, 256, 8): 1,050,112.
 
         Examples
         --------
@@ -181,28 +158,9 @@ class ResidualMLP:
         >>> ResidualMLP.count_params(3, 3, 10, 2, bias=True)
         513
         """
-        d, o, w, L = (int(v) for v in (in_dim, out_dim, width, depth))
-        n = w * d + 2 * L * w * w + o * w
-        return n + (w + 2 * L * w + o if bias else 0)
+        return _layout.count_params(in_dim, out_dim, width, depth, bias)
 
     # ------------------------------------------------------------------ parameters
-    def _build_layout(self):
-        d, w, o, L = self.in_dim, self.width, self.out_dim, self.depth
-        nb = 1 if self.bias else 0
-        self._shapes = {
-            "W0": (w, d), "b0": (w * nb,),
-            "W1": (L, w, w), "b1": (L, w * nb),
-            "W2": (L, w, w), "b2": (L, w * nb),
-            "W3": (o, w), "b3": (o * nb,),
-        }
-        self._offsets = {}
-        off = 0
-        for name, shape in self._shapes.items():
-            size = int(np.prod(shape))
-            self._offsets[name] = (off, off + size)
-            off += size
-        self.n_params = off
-
     def _bind_views(self, buf):
         for name, shape in self._shapes.items():
             lo, hi = self._offsets[name]
@@ -232,14 +190,7 @@ class ResidualMLP:
         >>> bool(np.array_equal(net.initialize(seed=1).pack(), theta))
         False
         """
-        g = as_generator(seed)
-        w, d, L = self.width, self.in_dim, self.depth
-        self.W0[...] = g.standard_normal(self.W0.shape) * (self.input_scale / np.sqrt(d))
-        self.W1[...] = g.standard_normal(self.W1.shape) * np.sqrt(2.0 / w)
-        self.W2[...] = g.standard_normal(self.W2.shape) / np.sqrt(w * max(L, 1))
-        self.W3[...] = g.standard_normal(self.W3.shape) * (1e-2 / np.sqrt(w))
-        for b in ("b0", "b1", "b2", "b3"):
-            getattr(self, b)[...] = 0.0
+        _layout.initialize(self, as_generator(seed))
         return self
 
     def pack(self) -> np.ndarray:
@@ -351,24 +302,16 @@ class ResidualMLP:
         >>> ResidualMLP.from_state(state).width
         4
         """
-        a = self.architecture()
-        return {
-            f"{prefix}format": np.array(FORMAT),
-            f"{prefix}format_version": np.array(FORMAT_VERSION),
-            f"{prefix}in_dim": np.array(a["in_dim"]), f"{prefix}out_dim": np.array(a["out_dim"]),
-            f"{prefix}width": np.array(a["width"]), f"{prefix}depth": np.array(a["depth"]),
-            f"{prefix}bias": np.array(a["bias"]), f"{prefix}dtype": np.array(self.dtype.name),
-            f"{prefix}theta": self._theta,
-        }
+        return _format.state(self, prefix)
 
     @classmethod
     def from_state(cls, data, prefix: str = "", source: str = "state") -> ResidualMLP:
         """Rebuild a network from :meth:`state` arrays, checking every field.
 
-        ``data`` is a dict of arrays or an open file (:func:`load_npz`). The parameter count
-        implied by the architecture fields is compared with the declared shape of ``theta``
-        before anything of that size is allocated, and the parameters are read straight into
-        the new network's buffer (no random initialisation is drawn).
+        ``data`` is a dict of arrays or an open file (:func:`sns_np._npz.load_npz`). The
+        parameter count implied by the architecture fields is compared with the declared shape
+        of ``theta`` before anything of that size is allocated, and the parameters are read
+        straight into the new network's buffer (no random initialisation is drawn).
 
         Examples
         --------
@@ -377,42 +320,7 @@ class ResidualMLP:
         >>> bool(np.array_equal(again.pack(), net.pack()))
         True
         """
-        if prefix + "format" not in data:
-            raise ModelFileError(f"{source}: missing field {prefix + 'format'!r}; not a "
-                                 f"{FORMAT} file")
-        fmt = _npz.field(data, prefix + "format", source, kinds="U", what="text")
-        if fmt != FORMAT:
-            raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}")
-        version = _npz.int_field(data, prefix + "format_version", source)
-        if version != FORMAT_VERSION:
-            raise ModelFileError(f"{source}: format version {version} is not supported "
-                                 f"(this sns_np reads version {FORMAT_VERSION})")
-        arch = {k: _npz.int_field(data, prefix + k, source, minimum=0 if k == "depth" else 1)
-                for k in ("in_dim", "out_dim", "width", "depth")}
-        bias = _npz.field(data, prefix + "bias", source, kinds="b", what="True or False")
-        name = _npz.field(data, prefix + "dtype", source, kinds="U", what="a dtype name")
-        if name not in ("float32", "float64"):
-            raise ModelFileError(f"{source}: field {prefix + 'dtype'!r} must be 'float32' or "
-                                 f"'float64', got {name[:40]!r}")
-        dtype = np.dtype(name)
-        n = cls.count_params(**arch, bias=bias)
-        key = prefix + "theta"
-        if key not in data:
-            raise ModelFileError(f"{source}: missing field {key!r}")
-        shape, dt = _npz.declared(data, key)
-        if shape != (n,) or dt != dtype:
-            raise ModelFileError(
-                f"{source}: field {key!r} (the parameter vector) has shape {shape} and dtype "
-                f"{dt}; the stored architecture ({arch['width']} wide, {arch['depth']} blocks) "
-                f"needs ({n},) {dtype}")
-        net = cls.zeros(**arch, bias=bias, dtype=dtype)
-        if isinstance(data, _npz.NpzReader):
-            data.read_into(key, net._theta)
-        else:
-            net._theta[...] = data[key]
-        if not np.all(np.isfinite(net._theta)):
-            raise ModelFileError(f"{source}: field {key!r} contains non-finite values")
-        return net
+        return _format.from_state(cls, data, prefix, source)
 
     def save(self, path) -> Path:
         """Write the network to ``path`` (.npz, no pickles), atomically (temp file + rename).
@@ -425,7 +333,7 @@ class ResidualMLP:
         >>> bool(np.array_equal(ResidualMLP.load("net.npz").pack(), net.pack()))
         True
         """
-        return save_npz(path, self.state())
+        return _format.save(self, path)
 
     @classmethod
     def load(cls, path) -> ResidualMLP:
@@ -438,11 +346,7 @@ class ResidualMLP:
         >>> ResidualMLP.load(path)
         ResidualMLP(in_dim=3, out_dim=3, width=4, depth=1, bias=False, dtype=float64; 56 parameters)
         """
-        try:
-            with load_npz(path) as data:
-                return cls.from_state(data, source=str(path))
-        except (RecursionError, MemoryError) as exc:   # a last line of defence: one line
-            raise ModelFileError(f"{path}: cannot be read ({type(exc).__name__})") from None
+        return _format.load(cls, path)
 
     # ------------------------------------------------------------------ forward jets
     def _check_x(self, x):
@@ -459,11 +363,6 @@ class ResidualMLP:
                              f"got {D.shape}")
         check_finite(D, "directions")
         return np.ascontiguousarray(D, dtype=self.dtype)
-
-    def _chunk(self, S):
-        if self.chunk_size is not None:
-            return self.chunk_size
-        return max(16, _ROWS_PER_CHUNK[self.dtype] // S)
 
     def jet(self, x, order=0, directions=None, second=None):
         """Value and derivatives of the network at ``x``.
@@ -524,14 +423,10 @@ class ResidualMLP:
                         not 0 <= second <= m:
                     raise ValueError(f"second must be an integer in [0, {m}], got {second!r}")
                 k = int(second)
-        S = n_streams(m, k)
-        Y = np.empty((n, S, self.out_dim), dtype=self.dtype)
+        Y = np.empty((n, n_streams(m, k), self.out_dim), dtype=self.dtype)
         if n:
-            if self.width <= SMALL_WIDTH:
-                self._forward_small(x, D, m, k, Y)
-            else:
-                self._forward_blas(x, D, m, k, Y)
-        return _unpack_streams(Y, order, m, k)
+            _engine.forward(self, x, D, m, k, Y)
+        return _engine.unpack_streams(Y, order, m, k)
 
     def __call__(self, x):
         """The value y (n, out_dim) at x (n, in_dim)."""
@@ -550,83 +445,87 @@ class ResidualMLP:
         >>> h.shape, bool(np.allclose(h @ net.W3.T, net(x)))         # y = h W3^T (no bias)
         ((1, 16), True)
         """
-        from .activations import softplus
+        return _engine.features(self, self._check_x(x), check_positive_int(chunk_size,
+                                                                            "chunk_size"))
 
-        x = self._check_x(x)
-        out = np.empty((x.shape[0], self.width), self.dtype)
-        for lo in range(0, x.shape[0], chunk_size):
-            xs = x[lo:lo + chunk_size]
-            h = softplus(xs @ self.W0.T + (self.b0 if self.bias else 0.0))
-            for blk in range(self.depth):
-                a = softplus(h @ self.W1[blk].T + (self.b1[blk] if self.bias else 0.0))
-                h = softplus(h + a @ self.W2[blk].T + (self.b2[blk] if self.bias else 0.0))
-            out[lo:lo + chunk_size] = h
-        return out
+    def fit_readout(self, x, target, weights=None, *, rel_reg=1e-10, increment=False,
+                    scale=1.0, current=None):
+        """Fit the read-out layer (``W3``, and ``b3`` with biases) by linear least squares.
 
-    def _bias_args(self):
-        return self.b0, self.b1, self.b2, self.b3
+        The network is linear in its read-out, ``y = h W3^T + b3`` with ``h = features(x)``,
+        so the best read-out of the current features at the points x is one solve of the
+        ``width (+1)`` square normal equations, with weights w_k and a relative Tikhonov term:
+        ``min sum_k w_k |[h_k, 1] T - r_k|^2 + lam |T|^2``,
+        ``lam = rel_reg * trace(G) / size(G)`` for the Gram matrix ``G`` of the weighted
+        features. Nothing else changes.
 
-    def _forward_small(self, x, D, m, k, Y):
-        if D is None:
-            D = np.broadcast_to(np.eye(self.in_dim, m, dtype=self.dtype), (x.shape[0],
-                                                                            self.in_dim, m))
-        b0, b1, b2, b3 = self._bias_args()
-        K.small_forward(x, D, self.W0, b0, self.W1, b1, self.W2, b2, self.W3, b3, self.bias,
-                        m, k, Y)
+        Parameters
+        ----------
+        x : (n, in_dim) float array
+        target : (n, out_dim) or (n,) float array
+            (n, out_dim): the outputs wanted at x. (n,): the values wanted of the scalar
+            read-out ``g = scale * mean_o y_o`` (a field's value); the same change is then
+            added to every row of ``W3`` (and to every entry of ``b3``). A scalar target needs
+            ``increment=True``.
+        weights : (n,) float array, optional
+            Non-negative weights of the points (quadrature weights, say); default all 1.
+        rel_reg : float
+            The relative Tikhonov weight (default 1e-10: only what keeps the solve regular).
+        increment : bool
+            False (default): replace the read-out by the fit, ``T`` pulled towards zero.
+            True: fit the residual ``target - current`` and add the change, ``T`` pulled
+            towards the current read-out (one Gauss-Newton step in the last layer).
+        scale : float
+            The factor of the scalar read-out (a (n,) target only).
+        current : (n, out_dim) or (n,) float array, optional
+            With ``increment``: the current outputs (or scalar read-out) at x, if the caller
+            has them already; by default they are computed from the features in float64.
 
-    def _first_layer(self, x, D, m, Z):
-        """Pre-activation streams of the input layer: W0 x, W0 d_a, and zero second order."""
-        np.matmul(x, self.W0.T, out=Z[:, 0, :])
-        for a in range(m):
-            if D is None:
-                Z[:, 1 + a, :] = self.W0[:, a]
-            else:
-                np.matmul(D[:, :, a], self.W0.T, out=Z[:, 1 + a, :])
-        Z[:, 1 + m:, :] = 0.0
+        Returns
+        -------
+        (width (+1), out_dim) or (width (+1),) float64 array
+            The solution ``T``: the new read-out (transposed, ``b3`` as its last row) or, with
+            ``increment``, the change added. When it is not finite (non-finite features or
+            target) the network is left unchanged, and the caller can tell from this array.
 
-    def _forward_blas(self, x, D, m, k, Y):
-        n = x.shape[0]
-        c = min(self._chunk(n_streams(m, k)), n)
-        plan = _parallel.plan(n, c)
-        if plan is None:  # threaded products and threaded passes, chunk after chunk
-            self._forward_chunks(x, D, m, k, Y, c, range(-(-n // c)), K.softplus_jet)
-            return
-        workers, c = plan
-        n_chunks = -(-n // c)
-        # whole chunks per worker: single-threaded products and serial passes (_parallel.py)
-        queue = _parallel.TaskQueue(n_chunks)
-        _parallel.run(lambda _: self._forward_chunks(x, D, m, k, Y, c, queue,
-                                                     K.softplus_jet_serial), workers, queue)
-
-    def _forward_chunks(self, x, D, m, k, Y, c, chunks, act):
-        """The jet streams of the chunks ``chunks`` (indices of c-point slices of x) into Y.
-
-        ``act`` is the fused softplus jet kernel (threaded or serial); H, T1, T2 and sig are
-        this call's own scratch, so that several calls can run side by side.
+        Examples
+        --------
+        >>> net = ResidualMLP(width=16, depth=1, seed=0)
+        >>> x = np.random.default_rng(0).standard_normal((200, 3))
+        >>> target = net.features(x) @ np.random.default_rng(1).standard_normal((16, 3))
+        >>> T = net.fit_readout(x, target)                  # the targets are a read-out
+        >>> bool(np.allclose(net(x), target, atol=1e-6)), T.shape
+        (True, (16, 3))
+        >>> d = net.fit_readout(x, target, increment=True)   # already fitted: nearly no change
+        >>> bool(np.abs(d).max() < 1e-6)
+        True
         """
-        n = x.shape[0]
-        S = n_streams(m, k)
-        w = self.width
-        H = np.empty((c, S, w), self.dtype)
-        T1 = np.empty((c, S, w), self.dtype)
-        T2 = np.empty((c, S, w), self.dtype)
-        sig = np.empty((c, w), self.dtype)
-        b0, b1, b2, b3 = self._bias_args()
-        for i in chunks:
-            lo, hi = i * c, min(i * c + c, n)
-            r = hi - lo
-            h, t1, t2, sg = H[:r], T1[:r], T2[:r], sig[:r]
-            h2, t12, t22 = h.reshape(r * S, w), t1.reshape(r * S, w), t2.reshape(r * S, w)
-            self._first_layer(x[lo:hi], None if D is None else D[lo:hi], m, t1)
-            act(t1, t1, b0, h, sg, m, k, False, self.bias)
-            for blk in range(self.depth):
-                np.matmul(h2, self.W1[blk].T, out=t12)
-                act(t1, t1, b1[blk], t1, sg, m, k, False, self.bias)
-                np.matmul(t12, self.W2[blk].T, out=t22)
-                act(t2, h, b2[blk], h, sg, m, k, True, self.bias)
-            np.matmul(h2, self.W3.T, out=Y[lo:hi].reshape(r * S, self.out_dim))
-            if self.bias:
-                Y[lo:hi, 0, :] += b3
+        x = self._check_x(x)
+        n, o = x.shape[0], self.out_dim
+        target = as_float_array(target, "target")
+        if target.shape not in ((n, o), (n,)):
+            raise ShapeError(f"target must have shape ({n}, {o}) or ({n},), got {target.shape}")
+        scalar = target.ndim == 1
+        if scalar and not increment:
+            raise ValueError("a scalar target (n,) is fitted as a change of the read-out: "
+                             "pass increment=True")
+        rel_reg = check_positive_float(rel_reg, "rel_reg", allow_zero=True)
+        scale = float(scale)
+        if not np.isfinite(scale) or scale == 0.0:
+            raise ValueError(f"scale must be finite and non-zero, got {scale}")
+        if current is not None:
+            current = as_float_array(current, "current")
+            if not increment or current.shape != target.shape:
+                raise ShapeError(f"current (with increment=True only) must have the shape of "
+                                 f"target, {target.shape}, got {current.shape}")
+        if weights is not None:
+            weights = as_float_array(weights, "weights")
+            if weights.shape != (n,):
+                raise ShapeError(f"weights must have shape ({n},), got {weights.shape}")
+            check_finite(weights, "weights")
+            if np.any(weights < 0):
+                raise ValueError("weights must be non-negative")
+        return _readout.fit(self, x, target, weights, rel_reg, increment, scale, current)
 
     # ------------------------------------------------------------------ reverse mode
     def vjp(self, x, dy, dJ=None, directions=None):
@@ -674,8 +573,7 @@ class ResidualMLP:
         def loss_fn(y, JD, sl):
             return 0.0, dy[sl], None if dJ is None else dJ[sl]
 
-        return self.value_and_grad(x, loss_fn, order=0 if m == 0 else 1, directions=D,
-                                   _m=m)[1]
+        return _engine.value_and_grad(self, x, D, m, loss_fn)[1]
 
     def _check_cotangent(self, a, shape, name):
         a = as_float_array(a, name)
@@ -684,7 +582,7 @@ class ResidualMLP:
         check_finite(a, name)
         return a.astype(self.dtype, copy=False)
 
-    def value_and_grad(self, x, loss_fn, order=1, directions=None, _m=None):
+    def value_and_grad(self, x, loss_fn, order=1, directions=None):
         """Fused forward, loss and backward pass, chunk by chunk (the training step).
 
         Parameters
@@ -717,206 +615,9 @@ class ResidualMLP:
         >>> grad.shape == (net.n_params,), value > 0
         (True, True)
         """
-        x = self._check_x(x) if _m is None else x
-        n = x.shape[0]
+        x = self._check_x(x)
         order = check_order(order, (0, 1))
-        D = directions
-        if _m is None and D is not None:
-            D = self._check_directions(D, n)
-        m = _m if _m is not None else (0 if order == 0 else
-                                       (self.in_dim if D is None else D.shape[2]))
-        grad = np.zeros(self.n_params, dtype=self.dtype)
-        if n == 0:
-            return 0.0, grad
-        if self.width <= SMALL_WIDTH:
-            return self._value_and_grad_small(x, D, m, loss_fn, grad)
-        return self._value_and_grad_blas(x, D, m, loss_fn, grad)
+        D = None if directions is None else self._check_directions(directions, x.shape[0])
+        m = 0 if order == 0 else (self.in_dim if D is None else D.shape[2])
+        return _engine.value_and_grad(self, x, D, m, loss_fn)
 
-    def _grad_views(self, grad):
-        return {name: grad[slice(*self._offsets[name])].reshape(shape)
-                for name, shape in self._shapes.items()}
-
-    def _value_and_grad_small(self, x, D, m, loss_fn, grad):
-        n = x.shape[0]
-        S = 1 + m
-        if D is None:
-            D = np.broadcast_to(np.eye(self.in_dim, max(m, 1), dtype=self.dtype),
-                                (n, self.in_dim, max(m, 1)))
-        Y = np.empty((n, S, self.out_dim), self.dtype)
-        b0, b1, b2, b3 = self._bias_args()
-        K.small_forward(x, D, self.W0, b0, self.W1, b1, self.W2, b2, self.W3, b3, self.bias,
-                        m, 0, Y)
-        y, JD = Y[:, 0, :], (np.swapaxes(Y[:, 1:, :], 1, 2) if m else None)
-        loss, dy, dJD = loss_fn(y, JD, slice(0, n))
-        Ybar = _pack_cotangents(dy, dJD, m, n, self.out_dim, self.dtype)
-        import numba
-        nblk = max(1, min(numba.get_num_threads(), n))
-        g = {name: np.zeros((nblk,) + shape, np.float64) for name, shape in self._shapes.items()}
-        K.small_vjp(x, D, self.W0, b0, self.W1, b1, self.W2, b2, self.W3, b3, self.bias, m,
-                    Ybar.astype(np.float64), g["W0"], g["b0"], g["W1"], g["b1"], g["W2"],
-                    g["b2"], g["W3"], g["b3"])
-        views = self._grad_views(grad)
-        for name in self._shapes:
-            views[name][...] = g[name].sum(axis=0)
-        return float(loss), grad
-
-    def _value_and_grad_blas(self, x, D, m, loss_fn, grad):
-        n = x.shape[0]
-        c = min(self._chunk(1 + m), n)
-        plan = _parallel.plan(n, c)
-        if plan is None:  # threaded products and threaded passes, chunk after chunk
-            losses = [0.0] * -(-n // c)
-            self._grad_chunks(x, D, m, loss_fn, grad, c, range(len(losses)), losses,
-                              K.softplus_jet, K.softplus_jet_back)
-            return math.fsum(losses), grad
-        workers, c = plan
-        n_chunks = -(-n // c)
-        losses = [0.0] * n_chunks
-        # Whole chunks per worker (_parallel.py), each with its own gradient accumulator.
-        # Chunks are dealt round-robin, not on demand, and the accumulators are added in
-        # worker order, so that the gradient does not depend on timing. loss_fn is called
-        # under a lock: it never runs concurrently with itself.
-        lock = threading.Lock()
-
-        def locked_loss(y, JD, sl):
-            with lock:
-                return loss_fn(y, JD, sl)
-
-        def work(i):
-            g = grad if i == 0 else np.zeros_like(grad)
-            self._grad_chunks(x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
-                              K.softplus_jet_serial, K.softplus_jet_back_serial)
-            return g
-
-        for g in _parallel.run(work, workers)[1:]:
-            grad += g
-        return math.fsum(losses), grad
-
-    def _grad_chunks(self, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back):
-        """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
-
-        The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
-        kernels (threaded or serial); the tape is this call's own.
-        """
-        n = x.shape[0]
-        S = 1 + m
-        w, L, o = self.width, self.depth, self.out_dim
-        dt = self.dtype
-        # tape, reused for every chunk
-        Z0 = np.empty((c, S, w), dt)
-        SG0 = np.empty((c, w), dt)
-        H = np.empty((L + 1, c, S, w), dt)
-        U = np.empty((L, c, S, w), dt)
-        SGU = np.empty((L, c, w), dt)
-        A = np.empty((L, c, S, w), dt)
-        Zt = np.empty((L, c, S, w), dt)
-        SGZ = np.empty((L, c, w), dt)
-        Y = np.empty((c, S, o), dt)
-        hbar = np.empty((c, S, w), dt)
-        abar = np.empty((c, S, w), dt)
-        tmp = np.empty((c, S, w), dt)
-        gv = self._grad_views(grad)
-        b0, b1, b2, b3 = self._bias_args()
-        for i in chunks:
-            lo, hi = i * c, min(i * c + c, n)
-            r = hi - lo
-            rows = r * S
-            Dc = None if D is None else D[lo:hi]
-            # forward, keeping the tape
-            self._first_layer(x[lo:hi], Dc, m, Z0[:r])
-            act(Z0[:r], Z0[:r], b0, H[0, :r], SG0[:r], m, 0, False, self.bias)
-            for blk in range(L):
-                np.matmul(_flat(H[blk], r), self.W1[blk].T, out=_flat(U[blk], r))
-                act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, 0, False,
-                    self.bias)
-                np.matmul(_flat(A[blk], r), self.W2[blk].T, out=_flat(Zt[blk], r))
-                act(Zt[blk, :r], H[blk, :r], b2[blk], H[blk + 1, :r], SGZ[blk, :r], m, 0, True,
-                    self.bias)
-            np.matmul(_flat(H[L], r), self.W3.T, out=_flat(Y, r))
-            if self.bias:
-                Y[:r, 0, :] += b3
-            y = Y[:r, 0, :]
-            JD = np.swapaxes(Y[:r, 1:, :], 1, 2) if m else None
-            loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
-            losses[i] = float(loss)
-            Ybar = _pack_cotangents(dy, dJD, m, r, o, dt)
-            # backward
-            Yb = Ybar.reshape(rows, o)
-            gv["W3"] += Yb.T @ _flat(H[L], r)
-            if self.bias:
-                gv["b3"] += Ybar[:, 0, :].sum(axis=0)
-            np.matmul(Yb, self.W3, out=_flat(hbar, r))
-            for blk in range(L - 1, -1, -1):
-                act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], hbar[:r], m)
-                gv["W2"][blk] += _flat(hbar, r).T @ _flat(A[blk], r)
-                if self.bias:
-                    gv["b2"][blk] += hbar[:r, 0, :].sum(axis=0)
-                np.matmul(_flat(hbar, r), self.W2[blk], out=_flat(abar, r))
-                act_back(U[blk, :r], SGU[blk, :r], abar[:r], abar[:r], m)
-                gv["W1"][blk] += _flat(abar, r).T @ _flat(H[blk], r)
-                if self.bias:
-                    gv["b1"][blk] += abar[:r, 0, :].sum(axis=0)
-                np.matmul(_flat(abar, r), self.W1[blk], out=_flat(tmp, r))
-                hbar[:r] += tmp[:r]
-            act_back(Z0[:r], SG0[:r], hbar[:r], hbar[:r], m)
-            gv["W0"] += hbar[:r, 0, :].T @ x[lo:hi]
-            for a in range(m):
-                if Dc is None:
-                    gv["W0"][:, a] += hbar[:r, 1 + a, :].sum(axis=0)
-                else:
-                    gv["W0"] += hbar[:r, 1 + a, :].T @ Dc[:, :, a]
-            if self.bias:
-                gv["b0"] += hbar[:r, 0, :].sum(axis=0)
-
-
-def _flat(a, r):
-    """The first r points of a (c, S, w) stream array as a (r * S, w) matrix (a view)."""
-    return a[:r].reshape(r * a.shape[1], -1)
-
-
-def _pack_cotangents(dy, dJD, m, n, o, dtype):
-    """Stack the cotangents of y (n, o) and JD (n, o, m) as streams (n, 1 + m, o)."""
-    Ybar = np.empty((n, 1 + m, o), dtype)
-    Ybar[:, 0, :] = dy
-    if m:
-        if dJD is None:
-            Ybar[:, 1:, :] = 0.0
-        else:
-            Ybar[:, 1:, :] = np.swapaxes(dJD, 1, 2)
-    return Ybar
-
-
-def _unpack_streams(Y, order, m, k):
-    """Split output streams (n, S, o) into y, J (n, o, m), D2 (n, o, k, k)."""
-    y = Y[:, 0, :]
-    if order == 0:
-        return np.ascontiguousarray(y)
-    J = np.ascontiguousarray(np.swapaxes(Y[:, 1:1 + m, :], 1, 2))
-    if order == 1:
-        return np.ascontiguousarray(y), J
-    n, _, o = Y.shape
-    D2 = np.empty((n, o, k, k), Y.dtype)
-    q = 1 + m
-    for a, b in _pairs(k):
-        D2[:, :, a, b] = Y[:, q, :]
-        D2[:, :, b, a] = Y[:, q, :]
-        q += 1
-    return np.ascontiguousarray(y), J, D2
-
-
-# ---------------------------------------------------------------------------------------------
-# .npz files: atomic writes, never unpickling
-# ---------------------------------------------------------------------------------------------
-
-def save_npz(path, arrays: dict) -> Path:
-    """Write ``arrays`` to ``path`` (.npz) through a temporary file, fsync and an atomic rename."""
-    path = Path(path)
-    if path.suffix.lower() != ".npz":
-        raise ValueError(f"model files must end in .npz, got {path.name!r}")
-
-    def write(tmp):
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-
-    # umask permissions, fsync before the rename (sns_np/_atomic.py)
-    return write_file(path, write)

@@ -25,6 +25,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .._atomic import exclusive, remove_stale_temporaries
+from .._npz import load_npz, save_npz
 from .._progress import Progress
 from .._signals import deferred_signals
 from .._validation import (
@@ -36,7 +37,7 @@ from .._validation import (
 )
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
-from ..nn.mlp import ResidualMLP, load_npz, save_npz
+from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule, make_optimizer
 from ..options import (
     AUTO,
@@ -847,15 +848,7 @@ def _gauss_newton_readout(net, target, rng, normal_weight, tangent_weight=1.0, n
 def _ridge_readout(net, target, rng, n=8192, rel_reg=1e-6):
     """Set W3 (and b3) to the regularised least-squares read-out of the initial features."""
     p, q, _ = target.sample(n, rng)
-    H = net.features(p).astype(np.float64)
-    if net.bias:
-        H = np.hstack([H, np.ones((n, 1))])
-    G = H.T @ H
-    G[np.diag_indices_from(G)] += rel_reg * np.trace(G) / G.shape[0]
-    Wt = np.linalg.solve(G, H.T @ q)
-    net.W3[...] = Wt[:net.width].T
-    if net.bias:
-        net.b3[...] = Wt[net.width]
+    net.fit_readout(p, q, rel_reg=rel_reg)
 
 
 def _evaluate(surface, target, n_eval):

@@ -17,9 +17,10 @@ import json
 import numpy as np
 
 from .. import _npz
+from .._npz import load_npz, save_npz
 from .._validation import as_points, check_order
 from ..errors import ModelFileError
-from ..nn.mlp import ResidualMLP, load_npz, save_npz
+from ..nn.mlp import ResidualMLP
 
 __all__ = ["SphericalNeuralSurface"]
 

@@ -29,7 +29,6 @@ from ..errors import ShapeError
 from ..sampling import uniform_sphere
 from .fit import fit_sampler
 from .model import SphericalNeuralSurface
-from .readout import surface_readout
 
 __all__ = ["fit_sdf", "SDFFitReport", "project_to_zero_set"]
 
@@ -341,9 +340,9 @@ def fit_sdf(sdf, grad=None, *, init="radial", center=(0.0, 0.0, 0.0), radius_max
 
         target._eval = projected
         net = S.net.copy()
-        surface_readout(net, p, target.q)
+        net.fit_readout(p, target.q, increment=True)
         S, _ = fit_sampler(target, net=net, steps=steps, metadata=dict(S.metadata), **common)
-        surface_readout(S.net, p, target.q)
+        S.net.fit_readout(p, target.q, increment=True)
         dmean, dmax, diag = measure(S)
         report.history.append({"iteration": it, "distance_mean": dmean, "distance_max": dmax})
     report.iterations = it

@@ -1,0 +1,371 @@
+"""The derivative engine of :class:`~sns_np.nn.mlp.ResidualMLP`: forward jets and the fused
+forward-loss-backward pass, as plain functions (private).
+
+Like scikit-learn's ``_forward_pass`` and ``_backprop``, these functions take the network only
+as the holder of its parameters (``W0`` ... ``b3``, ``width``, ``depth``, ``bias``, ``dtype``,
+``chunk_size``) and do no validation: the methods of ``ResidualMLP`` check their input and
+call them. ``docs/engine.md`` derives every line.
+
+Two paths:
+
+* small width (``width <= SMALL_WIDTH``): one Numba kernel runs a whole point per iteration
+  (:func:`sns_np.nn._kernels.small_forward`, :func:`~sns_np.nn._kernels.small_vjp`);
+* BLAS: the points are cut into chunks; every linear layer is one matrix product over all
+  streams of a chunk and every activation one fused Numba pass. The chunks run either one
+  after the other on threaded products and passes, or whole chunks per worker thread
+  (:mod:`sns_np.nn._parallel`).
+
+Streams (see ``_kernels.py``, "Stream layout"): a chunk of c points is a (c, S, w) array
+holding, per point, the value, m first-order and k (k + 1) / 2 second-order streams.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import numpy as np
+
+from . import _kernels as kern
+from . import _parallel
+from .activations import softplus
+
+#: widths up to this use the per-point Numba kernels instead of BLAS
+SMALL_WIDTH = 32
+
+#: rows (points x streams) per chunk on the BLAS path: 2 MB per activation buffer at width 256
+#: in float64. Measured for the full jet and the training step with one worker per core
+#: (docs/performance.md): 512 to 1536 rows are within noise, 4096 rows lose 10-20%.
+_ROWS_PER_CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
+
+
+def n_streams(m: int, k: int) -> int:
+    """Number of streams: the value, m first-order and k (k + 1) / 2 second-order ones.
+
+    Examples
+    --------
+    >>> n_streams(3, 0), n_streams(3, 3), n_streams(3, 2)         # value+J, +D2, geometry's 7
+    (4, 10, 7)
+    """
+    return 1 + m + k * (k + 1) // 2
+
+
+def pairs(k):
+    """The second-order stream pairs (a, b), a <= b < k, in stream order."""
+    return [(a, b) for a in range(k) for b in range(a, k)]
+
+
+def chunk_points(net, S):
+    """Most points per chunk for S streams (the network's ``chunk_size`` if it has one)."""
+    if net.chunk_size is not None:
+        return net.chunk_size
+    return max(16, _ROWS_PER_CHUNK[net.dtype] // S)
+
+
+def _biases(net):
+    return net.b0, net.b1, net.b2, net.b3
+
+
+def _grad_views(net, grad):
+    """The parameter arrays of a flat gradient (n_params,), as views named like the network's."""
+    return {name: grad[sl].reshape(shape) for name, (sl, shape) in net.param_slices().items()}
+
+
+def _eye_directions(net, n, m):
+    """The first m coordinate axes as directions (n, in_dim, m), without a copy per point."""
+    return np.broadcast_to(np.eye(net.in_dim, m, dtype=net.dtype), (n, net.in_dim, m))
+
+
+# ---------------------------------------------------------------------------------- forward
+
+def forward(net, x, D, m, k, Y):
+    """Output streams Y (n, S, out_dim) at checked points x (n, in_dim), n >= 1.
+
+    ``D`` (n, in_dim, m) are the directions, or None for the coordinate axes; second-order
+    streams along the pairs of the first k of them.
+    """
+    if net.width <= SMALL_WIDTH:
+        forward_small(net, x, D, m, k, Y)
+    else:
+        forward_blas(net, x, D, m, k, Y)
+
+
+def forward_small(net, x, D, m, k, Y):
+    """The small-width path: one Numba kernel, one point per iteration."""
+    if D is None:
+        D = _eye_directions(net, x.shape[0], m)
+    b0, b1, b2, b3 = _biases(net)
+    kern.start_threads()
+    kern.small_forward(x, D, net.W0, b0, net.W1, b1, net.W2, b2, net.W3, b3, net.bias, m, k, Y)
+
+
+def first_layer(net, x, D, m, Z):
+    """Pre-activation streams of the input layer: W0 x, W0 d_a, and zero second order."""
+    np.matmul(x, net.W0.T, out=Z[:, 0, :])
+    for a in range(m):
+        if D is None:
+            Z[:, 1 + a, :] = net.W0[:, a]
+        else:
+            np.matmul(D[:, :, a], net.W0.T, out=Z[:, 1 + a, :])
+    Z[:, 1 + m:, :] = 0.0
+
+
+def forward_blas(net, x, D, m, k, Y):
+    """The BLAS path: chunk after chunk on all threads, or whole chunks per worker."""
+    n = x.shape[0]
+    c = min(chunk_points(net, n_streams(m, k)), n)
+    plan = _parallel.plan(n, c)
+    if plan is None:  # threaded products and threaded passes, chunk after chunk
+        kern.start_threads()
+        forward_chunks(net, x, D, m, k, Y, c, range(-(-n // c)), kern.softplus_jet)
+        return
+    workers, c = plan
+    n_chunks = -(-n // c)
+    # whole chunks per worker: single-threaded products and serial passes (_parallel.py)
+    queue = _parallel.TaskQueue(n_chunks)
+    _parallel.run(lambda _: forward_chunks(net, x, D, m, k, Y, c, queue,
+                                           kern.softplus_jet_serial), workers, queue)
+
+
+def forward_chunks(net, x, D, m, k, Y, c, chunks, act):
+    """The jet streams of the chunks ``chunks`` (indices of c-point slices of x) into Y.
+
+    ``act`` is the fused softplus jet kernel (threaded or serial); hid, T1, T2 and sig are
+    this call's own scratch, so that several calls can run side by side.
+    """
+    n = x.shape[0]
+    S = n_streams(m, k)
+    w = net.width
+    hid = np.empty((c, S, w), net.dtype)
+    T1 = np.empty((c, S, w), net.dtype)
+    T2 = np.empty((c, S, w), net.dtype)
+    sig = np.empty((c, w), net.dtype)
+    b0, b1, b2, b3 = _biases(net)
+    for i in chunks:
+        lo, hi = i * c, min(i * c + c, n)
+        r = hi - lo
+        h, t1, t2, sg = hid[:r], T1[:r], T2[:r], sig[:r]
+        h2, t12, t22 = h.reshape(r * S, w), t1.reshape(r * S, w), t2.reshape(r * S, w)
+        first_layer(net, x[lo:hi], None if D is None else D[lo:hi], m, t1)
+        act(t1, t1, b0, h, sg, m, k, False, net.bias)
+        for blk in range(net.depth):
+            np.matmul(h2, net.W1[blk].T, out=t12)
+            act(t1, t1, b1[blk], t1, sg, m, k, False, net.bias)
+            np.matmul(t12, net.W2[blk].T, out=t22)
+            act(t2, h, b2[blk], h, sg, m, k, True, net.bias)
+        np.matmul(h2, net.W3.T, out=Y[lo:hi].reshape(r * S, net.out_dim))
+        if net.bias:
+            Y[lo:hi, 0, :] += b3
+
+
+def features(net, x, chunk_size):
+    """The last hidden layer h(x) (n, width) in plain NumPy, ``chunk_size`` points at a time.
+
+    The readable reference for the forward pass (no streams, no kernels): ``y = h W3^T + b3``.
+    """
+    out = np.empty((x.shape[0], net.width), net.dtype)
+    for lo in range(0, x.shape[0], chunk_size):
+        xs = x[lo:lo + chunk_size]
+        h = softplus(xs @ net.W0.T + (net.b0 if net.bias else 0.0))
+        for blk in range(net.depth):
+            a = softplus(h @ net.W1[blk].T + (net.b1[blk] if net.bias else 0.0))
+            h = softplus(h + a @ net.W2[blk].T + (net.b2[blk] if net.bias else 0.0))
+        out[lo:lo + chunk_size] = h
+    return out
+
+
+def unpack_streams(Y, order, m, k):
+    """Split output streams (n, S, o) into y, J (n, o, m), D2 (n, o, k, k)."""
+    y = Y[:, 0, :]
+    if order == 0:
+        return np.ascontiguousarray(y)
+    J = np.ascontiguousarray(np.swapaxes(Y[:, 1:1 + m, :], 1, 2))
+    if order == 1:
+        return np.ascontiguousarray(y), J
+    n, _, o = Y.shape
+    D2 = np.empty((n, o, k, k), Y.dtype)
+    q = 1 + m
+    for a, b in pairs(k):
+        D2[:, :, a, b] = Y[:, q, :]
+        D2[:, :, b, a] = Y[:, q, :]
+        q += 1
+    return np.ascontiguousarray(y), J, D2
+
+
+# ---------------------------------------------------------------------------------- reverse
+
+def value_and_grad(net, x, D, m, loss_fn):
+    """Fused forward, loss and backward pass at checked x (n, in_dim): ``(loss, grad)``.
+
+    ``D`` (n, in_dim, m) or None (the coordinate axes); m = 0 is the value alone. The contract
+    of ``loss_fn`` is that of :meth:`ResidualMLP.value_and_grad`.
+    """
+    grad = np.zeros(net.n_params, dtype=net.dtype)
+    if x.shape[0] == 0:
+        return 0.0, grad
+    if net.width <= SMALL_WIDTH:
+        return value_and_grad_small(net, x, D, m, loss_fn, grad)
+    return value_and_grad_blas(net, x, D, m, loss_fn, grad)
+
+
+def pack_cotangents(dy, dJD, m, n, o, dtype):
+    """Stack the cotangents of y (n, o) and JD (n, o, m) as streams (n, 1 + m, o)."""
+    Ybar = np.empty((n, 1 + m, o), dtype)
+    Ybar[:, 0, :] = dy
+    if m:
+        if dJD is None:
+            Ybar[:, 1:, :] = 0.0
+        else:
+            Ybar[:, 1:, :] = np.swapaxes(dJD, 1, 2)
+    return Ybar
+
+
+def value_and_grad_small(net, x, D, m, loss_fn, grad):
+    """The small-width path: one forward kernel, the loss on all points, one reverse kernel.
+
+    The reverse kernel accumulates float64 gradients per block of points (one block per
+    Numba thread); the blocks are added here.
+    """
+    import numba
+
+    n = x.shape[0]
+    S = 1 + m
+    if D is None:
+        D = _eye_directions(net, n, max(m, 1))
+    Y = np.empty((n, S, net.out_dim), net.dtype)
+    b0, b1, b2, b3 = _biases(net)
+    kern.start_threads()
+    kern.small_forward(x, D, net.W0, b0, net.W1, b1, net.W2, b2, net.W3, b3, net.bias,
+                       m, 0, Y)
+    y, JD = Y[:, 0, :], (np.swapaxes(Y[:, 1:, :], 1, 2) if m else None)
+    loss, dy, dJD = loss_fn(y, JD, slice(0, n))
+    Ybar = pack_cotangents(dy, dJD, m, n, net.out_dim, net.dtype)
+    nblk = max(1, min(numba.get_num_threads(), n))
+    slices = net.param_slices()
+    g = {name: np.zeros((nblk,) + shape, np.float64) for name, (_, shape) in slices.items()}
+    kern.small_vjp(x, D, net.W0, b0, net.W1, b1, net.W2, b2, net.W3, b3, net.bias, m,
+                   Ybar.astype(np.float64), g["W0"], g["b0"], g["W1"], g["b1"], g["W2"],
+                   g["b2"], g["W3"], g["b3"])
+    views = _grad_views(net, grad)
+    for name in slices:
+        views[name][...] = g[name].sum(axis=0)
+    return float(loss), grad
+
+
+def value_and_grad_blas(net, x, D, m, loss_fn, grad):
+    """The BLAS path: chunk after chunk on all threads, or round-robin chunks per worker."""
+    n = x.shape[0]
+    c = min(chunk_points(net, 1 + m), n)
+    plan = _parallel.plan(n, c)
+    if plan is None:  # threaded products and threaded passes, chunk after chunk
+        kern.start_threads()
+        losses = [0.0] * -(-n // c)
+        grad_chunks(net, x, D, m, loss_fn, grad, c, range(len(losses)), losses,
+                    kern.softplus_jet, kern.softplus_jet_back)
+        return math.fsum(losses), grad
+    workers, c = plan
+    n_chunks = -(-n // c)
+    losses = [0.0] * n_chunks
+    # Whole chunks per worker (_parallel.py), each with its own gradient accumulator.
+    # Chunks are dealt round-robin, not on demand, and the accumulators are added in
+    # worker order, so that the gradient does not depend on timing. loss_fn is called under
+    # a lock: it never runs concurrently with itself.
+    lock = threading.Lock()
+
+    def locked_loss(y, JD, sl):
+        with lock:
+            return loss_fn(y, JD, sl)
+
+    def work(i):
+        g = grad if i == 0 else np.zeros_like(grad)
+        grad_chunks(net, x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
+                    kern.softplus_jet_serial, kern.softplus_jet_back_serial)
+        return g
+
+    for g in _parallel.run(work, workers)[1:]:
+        grad += g
+    return math.fsum(losses), grad
+
+
+def flat(a, r):
+    """The first r points of a (c, S, w) stream array as a (r * S, w) matrix (a view)."""
+    return a[:r].reshape(r * a.shape[1], -1)
+
+
+def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back):
+    """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
+
+    The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
+    kernels (threaded or serial); the tape is this call's own.
+    """
+    n = x.shape[0]
+    S = 1 + m
+    w, depth, o = net.width, net.depth, net.out_dim
+    dt = net.dtype
+    # the tape, reused for every chunk: hid[blk] is the input of block blk (hid[depth] feeds
+    # the read-out), U, A the inner pre-activation and activation, Zt the block's
+    # pre-activation; SG* the sigmoids of the value streams
+    Z0 = np.empty((c, S, w), dt)
+    SG0 = np.empty((c, w), dt)
+    hid = np.empty((depth + 1, c, S, w), dt)
+    U = np.empty((depth, c, S, w), dt)
+    SGU = np.empty((depth, c, w), dt)
+    A = np.empty((depth, c, S, w), dt)
+    Zt = np.empty((depth, c, S, w), dt)
+    SGZ = np.empty((depth, c, w), dt)
+    Y = np.empty((c, S, o), dt)
+    hbar = np.empty((c, S, w), dt)
+    abar = np.empty((c, S, w), dt)
+    tmp = np.empty((c, S, w), dt)
+    gv = _grad_views(net, grad)
+    b0, b1, b2, b3 = _biases(net)
+    for i in chunks:
+        lo, hi = i * c, min(i * c + c, n)
+        r = hi - lo
+        rows = r * S
+        Dc = None if D is None else D[lo:hi]
+        # forward, keeping the tape
+        first_layer(net, x[lo:hi], Dc, m, Z0[:r])
+        act(Z0[:r], Z0[:r], b0, hid[0, :r], SG0[:r], m, 0, False, net.bias)
+        for blk in range(depth):
+            np.matmul(flat(hid[blk], r), net.W1[blk].T, out=flat(U[blk], r))
+            act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, 0, False,
+                net.bias)
+            np.matmul(flat(A[blk], r), net.W2[blk].T, out=flat(Zt[blk], r))
+            act(Zt[blk, :r], hid[blk, :r], b2[blk], hid[blk + 1, :r], SGZ[blk, :r], m, 0, True,
+                net.bias)
+        np.matmul(flat(hid[depth], r), net.W3.T, out=flat(Y, r))
+        if net.bias:
+            Y[:r, 0, :] += b3
+        y = Y[:r, 0, :]
+        JD = np.swapaxes(Y[:r, 1:, :], 1, 2) if m else None
+        loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
+        losses[i] = float(loss)
+        Ybar = pack_cotangents(dy, dJD, m, r, o, dt)
+        # backward
+        Yb = Ybar.reshape(rows, o)
+        gv["W3"] += Yb.T @ flat(hid[depth], r)
+        if net.bias:
+            gv["b3"] += Ybar[:, 0, :].sum(axis=0)
+        np.matmul(Yb, net.W3, out=flat(hbar, r))
+        for blk in range(depth - 1, -1, -1):
+            act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], hbar[:r], m)
+            gv["W2"][blk] += flat(hbar, r).T @ flat(A[blk], r)
+            if net.bias:
+                gv["b2"][blk] += hbar[:r, 0, :].sum(axis=0)
+            np.matmul(flat(hbar, r), net.W2[blk], out=flat(abar, r))
+            act_back(U[blk, :r], SGU[blk, :r], abar[:r], abar[:r], m)
+            gv["W1"][blk] += flat(abar, r).T @ flat(hid[blk], r)
+            if net.bias:
+                gv["b1"][blk] += abar[:r, 0, :].sum(axis=0)
+            np.matmul(flat(abar, r), net.W1[blk], out=flat(tmp, r))
+            hbar[:r] += tmp[:r]
+        act_back(Z0[:r], SG0[:r], hbar[:r], hbar[:r], m)
+        gv["W0"] += hbar[:r, 0, :].T @ x[lo:hi]
+        for a in range(m):
+            if Dc is None:
+                gv["W0"][:, a] += hbar[:r, 1 + a, :].sum(axis=0)
+            else:
+                gv["W0"] += hbar[:r, 1 + a, :].T @ Dc[:, :, a]
+        if net.bias:
+            gv["b0"] += hbar[:r, 0, :].sum(axis=0)
