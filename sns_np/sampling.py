@@ -426,8 +426,8 @@ def rejection_sample(surface, n_target: int, rng=None, *, oversample: float = 10
                      max_proposals: int = 20_000_000) -> SurfaceSample:
     """Sphere points whose images are uniform in surface area (paper Sec. 5, steps i-iv).
 
-    1. Draw ``M`` uniform sphere points ``p_j`` (normalised Gaussians, ``M = oversample *
-       n_target`` to start).
+    1. Draw ``n_prop`` uniform sphere points ``p_j`` (normalised Gaussians, ``n_prop =
+       oversample * n_target`` to start).
     2. Evaluate the area element ``d_j = sqrt(det I)`` at these unit points.
     3. Keep ``p_j`` with probability ``n_target d_j / sum_k d_k``; the expected number of
        points is exactly ``n_target``. Where that probability would exceed 1 (a very uneven

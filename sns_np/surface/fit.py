@@ -16,8 +16,6 @@ measured accuracy), and the returned surface is converted to float64 for evaluat
 from __future__ import annotations
 
 import contextlib
-import hashlib
-import json
 import os
 import time
 from dataclasses import asdict, dataclass, field
@@ -25,21 +23,17 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from .._atomic import exclusive, remove_stale_temporaries
-from .._npz import load_npz, save_npz
 from .._progress import Progress
 from .._signals import deferred_signals
 from .._validation import (
     as_generator,
     check_choice,
-    check_output_file,
-    check_positive_float,
-    check_positive_int,
 )
-from ..errors import DivergenceError, FitInterrupted, ModelFileError
+from ..errors import DivergenceError, FitInterrupted
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
-from ..nn.optim import Schedule, make_optimizer
-from ..options import (
+from ..nn.optim import make_optimizer
+from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constants, re-exported)
     AUTO,
     CHECKPOINT_SECONDS,
     CHECKPOINT_STEPS,
@@ -48,6 +42,16 @@ from ..options import (
     FitOptions,
 )
 from ..sampling import uniform_sphere
+from ._checkpoint import (
+    _check_checkpoint_options,
+    _CheckpointCadence,
+    _load_checkpoint,
+    _resume_key,
+    _save_checkpoint,
+)
+from ._plan import _MAX_AUTO_STEPS, _ClockCosine, _plan, _probe_step_time, _schedule, detail
+from ._readouts import _gauss_newton_readout, _ridge_readout
+from ._targets import _MeshTarget, _ShapeTarget
 from .losses import normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
@@ -154,79 +158,6 @@ class FitReport:
         d["history"] = {k: list(map(float, v)) for k, v in self.history.items()}
         d["position_relative"] = self.position_relative
         return d
-
-
-# ------------------------------------------------------------------------------ targets
-
-class _MeshTarget:
-    """Samples of a mesh and its spherical embedding, in the normalised frame."""
-
-    def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong"):
-        from .. import mesh as M
-        V = np.asarray(V, dtype=np.float64)
-        F = np.asarray(F)
-        if check:
-            M.check(V, F)
-        if Vs is None:
-            Vs = M.spherical_embedding(V, F, verbose=verbose)[0]
-        self.corr = M.Correspondence(V, F, Vs)
-        A = M.face_areas(V, F)
-        self.area = float(A.sum())
-        self.center = (A[:, None] * V[F].mean(axis=1)).sum(axis=0) / self.area
-        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
-        self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
-        self.fingerprint = _fingerprint(V, F)
-        self.smooth = smooth
-
-    def _targets(self, face, beta):
-        q, nrm = self.corr.to_mesh(face, beta)
-        if self.smooth == "phong":
-            q = self.corr.phong_point(face, beta)
-        return (q - self.center) / self.scale, nrm
-
-    def sample(self, n, rng):
-        face, beta = self.corr.sample_barycentric(n, rng)
-        return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
-
-    def evaluate_at(self, p):
-        return self._targets(*self.corr.locate(p))
-
-
-class _ShapeTarget:
-    """Samples of an analytic surface map S(p), uniform on the parameter sphere."""
-
-    def __init__(self, shape):
-        from ..protocol import surface_jet
-        from ..quadrature import sphere_quadrature
-        self.shape = shape
-        P, w = sphere_quadrature(96)
-        y, J = surface_jet(shape, P, 1)
-        JR = np.einsum("kia,kab->kib", J, tangent_frame(P))
-        dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1) * w
-        self.area = float(dA.sum())
-        self.center = (dA[:, None] * y).sum(axis=0) / self.area
-        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
-        self.bbox_diagonal = float(np.linalg.norm(y.max(axis=0) - y.min(axis=0)))
-        self.fingerprint = f"shape:{type(shape).__name__}:{_fingerprint(y[:64], None)}"
-
-    def sample(self, n, rng):
-        p = uniform_sphere(n, rng)
-        q, nrm = self.evaluate_at(p)
-        return p, q, nrm
-
-    def evaluate_at(self, p):
-        from ..protocol import surface_jet
-        y, J = surface_jet(self.shape, p, 1)
-        JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
-        nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
-        return (y - self.center) / self.scale, nrm
-
-
-def _fingerprint(V, F):
-    h = hashlib.sha256(np.ascontiguousarray(V, dtype=np.float64).tobytes())
-    if F is not None:
-        h.update(np.ascontiguousarray(F, dtype=np.int64).tobytes())
-    return h.hexdigest()[:16]
 
 
 # ------------------------------------------------------------------------------ public API
@@ -581,132 +512,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     return surface, report
 
 
-# ------------------------------------------------------------------------------ planning
-
-# DETAIL_RANGE (where a target counts as smooth or detailed) and AUTO (what "auto" chooses at
-# either end) live in sns_np.options, beside the options they fill in
-
-
-#: the most steps a fit with no step count takes (it normally stops on its time budget)
-_MAX_AUTO_STEPS = 1_000_000
-
-
-class _CheckpointCadence:
-    """When a fit writes its checkpoint: every ``every`` steps or ``seconds`` seconds since the
-    last write, whichever comes first; ``step`` is the step the file holds (None: no file)."""
-
-    def __init__(self, path, every, seconds, held=None):
-        self.path, self.every, self.seconds = path, every, seconds
-        self.step = held
-        self._last = time.monotonic()
-
-    def due(self, step):
-        if self.path is None:
-            return False
-        return (self.every is not None and step % self.every == 0) or (
-            self.seconds is not None and time.monotonic() - self._last >= self.seconds)
-
-    def saved(self, step):
-        self.step, self._last = step, time.monotonic()
-
-
-class _ClockCosine:
-    """A cosine schedule on the clock: the warm-up of ``base`` over its first steps, then the
-    decay from ``lr`` to ``lr_min`` over the fraction of ``budget`` seconds elapsed."""
-
-    kind = "cosine-clock"
-
-    def __init__(self, base, clock, budget):
-        self.base, self.clock, self.budget = base, clock, float(budget)
-
-    def __call__(self, t):
-        b = self.base
-        lr = b.cosine_at(min(self.clock() / self.budget, 1.0))
-        if b.warmup and t < b.warmup:
-            lr *= (t + 1) / b.warmup
-        return float(lr)
-
-
-def _auto_values(d):
-    """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1)."""
-    lo, hi = DETAIL_RANGE
-    t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
-    a, b = AUTO["smooth"], AUTO["detailed"]
-    vals = {k: float(a[k] ** (1 - t) * b[k] ** t) for k in a}
-    if t in (0.0, 1.0):
-        vals = dict(a if t == 0.0 else b)
-    return vals, t
-
-
-def detail(target, width=256, depth=8, n=4096, seed=12345):
-    """How much detail a target has: the held-out RMS error (normalised units) of the best
-    linear read-out of the scale-4 features of a fresh reference network (256 x 8, whatever
-    the network being fitted).
-
-    Smooth shapes are nearly linear in those features (the built-in ellipsoid: 3.5e-3); meshes
-    with ears, horns and faces are not (spot: 4.8e-2). It costs one forward pass of ``n``
-    points and a ``width x width`` solve, and draws from its own generator, so it does not
-    change a fit's random stream.
-
-    Examples
-    --------
-    >>> from sns_np.shapes import Bobble, Ellipsoid
-    >>> from sns_np.surface.fit import _ShapeTarget
-    >>> smooth = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7)))
-    >>> bumpy = detail(_ShapeTarget(Bobble()))
-    >>> bool(smooth < DETAIL_RANGE[0]), bool(bumpy > DETAIL_RANGE[1])
-    (True, True)
-    """
-    g = np.random.default_rng(seed)
-    net = ResidualMLP(width=width, depth=depth, seed=g, input_scale=4.0)
-    p, q, _ = target.sample(2 * n, g)
-    n = len(p) // 2                      # a target with a finite pool may return fewer
-    if n < 16:
-        raise ValueError(f"detail: the target returned {len(p)} samples; need at least 32")
-    H = net.features(p)
-    G = H[:n].T @ H[:n]
-    G[np.diag_indices_from(G)] += 1e-6 * np.trace(G) / G.shape[0]
-    W = np.linalg.solve(G, H[:n].T @ q[:n])
-    r = H[n:2 * n] @ W - q[n:2 * n]
-    return float(np.sqrt((r ** 2).sum(axis=1).mean()))
-
-
-def _plan(target, o, net, elapsed=0.0):
-    """Fill the options left to "auto" (None) from the target's detail; returns the choices
-    made (option -> {"value", "why"})."""
-    choices = {}
-    if net is not None:
-        # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
-        for k in ("lr", "warmup", "batch"):
-            if o[k] is None:
-                o[k] = AUTO["smooth"][k]
-    todo = [k for k in ("input_scale", "lr", "warmup", "batch")
-            if o[k] is None and net is None]
-    if o["steps"] is None and o["time_budget"] is None:
-        todo.append("time_budget")
-    if todo:
-        d = detail(target)
-        vals, t = _auto_values(d)
-        kind = "smooth" if t == 0 else "detailed" if t == 1 else f"between ({t:.2f})"
-        choices["detail"] = {"value": d, "why": f"{kind}: read-out error of scale-4 features; "
-                             f"smooth <= {DETAIL_RANGE[0]:g}, detailed >= {DETAIL_RANGE[1]:g}"}
-        for k in todo:
-            v = vals[k]
-            if k == "time_budget":
-                v = max(v - elapsed, 10.0)
-            elif k in ("warmup", "batch"):
-                v = int(round(v))
-            o[k] = v
-            choices[k] = {"value": v, "why": f"{kind} target"
-                          + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
-                             if k == "time_budget" and elapsed else "")}
-    if o["steps"] is None:
-        choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
-                            "learning rate decays with the time elapsed"}
-    return choices
-
-
 # ------------------------------------------------------------------------------ internals
+# (the targets in _targets.py, planning "auto" in _plan.py, the checkpoint in _checkpoint.py,
+# the read-out refits in _readouts.py; the options and their AUTO ends in sns_np.options)
 
 #: the keyword arguments of fit_sampler that fit_mesh and fit_shape pass through
 _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resume", "progress",
@@ -729,128 +537,6 @@ def _check_early(options):
                 f"of them (time_budget alone sizes the step count to fit)")
 
 
-def _check_checkpoint_options(path, every, seconds):
-    """The checkpoint's file name, folder and cadence, checked before any work."""
-    if path is not None:
-        check_output_file(path, ".npz", "checkpoint")
-    if every is not None:
-        check_positive_int(every, "checkpoint_every")
-    if seconds is not None:
-        check_positive_float(seconds, "checkpoint_seconds")
-
-
-def _probe_step_time(o, repeats=2):
-    """Seconds per training step of the options' (FitOptions) network and batch, measured on
-    this machine (a fresh network, random points: about a second)."""
-    g = np.random.default_rng(0)
-    net = ResidualMLP(width=o.width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
-    # an automatic batch is not known yet: the smallest it can be (lenient)
-    batch = o.batch or min(end["batch"] for end in AUTO.values())
-    p = uniform_sphere(batch, g)
-    pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
-
-    def loss_fn(y, JD, sl):
-        return float((y * y).sum()), 2 * y, np.zeros_like(JD)
-
-    net.value_and_grad(pc, loss_fn, order=1, directions=R)      # compiles on a first call
-    t = time.perf_counter()
-    for _ in range(repeats):
-        net.value_and_grad(pc, loss_fn, order=1, directions=R)
-    return (time.perf_counter() - t) / repeats
-
-
-def _schedule(o):
-    if o["schedule"] == "constant":
-        return Schedule("constant", o["lr"], warmup=o["warmup"])
-    return Schedule("cosine", o["lr"], total=o["steps"] or _MAX_AUTO_STEPS, lr_min=o["lr_min"],
-                    warmup=o["warmup"])
-
-
-def _feature_jet(net, p, R):
-    """The last hidden layer and its derivatives along the frame: h (n, w), hD (n, w, 2)."""
-    f = ResidualMLP.zeros(net.in_dim, net.width, net.width, net.depth, net.bias,
-                          dtype=np.float64)
-    src = net.astype(np.float64)
-    for name, (sl, _) in src.param_slices().items():
-        if name not in ("W3", "b3"):
-            f.theta[sl] = src.theta[sl]
-    f.W3[...] = np.eye(net.width)
-    return f.jet(p, order=1, directions=R)
-
-
-def _cross_matrix(a):
-    """[a]_x with [a]_x b = a x b, for rows a (n, 3) -> (n, 3, 3)."""
-    z = np.zeros(len(a))
-    return np.stack([np.stack([z, -a[:, 2], a[:, 1]], 1), np.stack([a[:, 2], z, -a[:, 0]], 1),
-                     np.stack([-a[:, 1], a[:, 0], z], 1)], 1)
-
-
-def _gauss_newton_readout(net, target, rng, normal_weight, tangent_weight=1.0, n=4096,
-                          iters=2, rel_reg=1e-6):
-    """Levenberg-Marquardt steps on the output layer for the full position + normal loss.
-
-    The loss is quadratic in ``W3`` through the positions and, through the normals
-    ``n = (W3 h_u) x (W3 h_v) / |...|``, nearly so: linearising the normals gives a
-    768-unknown least-squares problem whose solution is the best read-out of the current
-    features (variable projection). A step is kept only if it lowers the loss on its sample.
-    """
-    p, q, nt = target.sample(n, rng)
-    R = tangent_frame(p)
-    h, hD = _feature_jet(net, p, R)
-    w = net.width
-    W = net.W3.astype(np.float64).copy()
-    sw = np.sqrt(normal_weight)
-    Mh = np.einsum("ki,kj->kij", nt, nt)
-    Mh = Mh + np.sqrt(tangent_weight) * (np.eye(3) - Mh)
-
-    def residuals(W):
-        y = h @ W.T + (net.b3.astype(np.float64) if net.bias else 0.0)
-        Su, Sv = hD[:, :, 0] @ W.T, hD[:, :, 1] @ W.T
-        nrm, c = normals_from_tangents(Su, Sv, degenerate="zero")
-        rp = np.einsum("kab,kb->ka", Mh, y - q)
-        return rp, sw * (nrm - nt), Su, Sv, nrm, c
-
-    def loss(rp, rn):
-        return float((rp ** 2).sum() + (rn ** 2).sum()) / n
-
-    rp, rn, Su, Sv, nrm, c = residuals(W)
-    cur = loss(rp, rn)
-    lam = None
-    for _ in range(iters):
-        # position block: d rp_a / dW_ij = Mh_ai h_j ; normal block as in losses.py
-        Jp = np.einsum("kai,kj->kaij", Mh, h).reshape(n * 3, 3 * w)
-        P = (np.eye(3) - np.einsum("ka,kb->kab", nrm, nrm)) / c[:, None, None]
-        A = -np.einsum("kab,kbi->kai", P, _cross_matrix(Sv))
-        B = np.einsum("kab,kbi->kai", P, _cross_matrix(Su))
-        Jn = sw * (np.einsum("kai,kj->kaij", A, hD[:, :, 0])
-                   + np.einsum("kai,kj->kaij", B, hD[:, :, 1])).reshape(n * 3, 3 * w)
-        G = Jp.T @ Jp + Jn.T @ Jn
-        g = Jp.T @ rp.ravel() + Jn.T @ rn.ravel()
-        if lam is None:
-            lam = rel_reg * np.trace(G) / G.shape[0]
-        for _try in range(6):
-            Gd = G.copy()
-            Gd[np.diag_indices_from(Gd)] += lam
-            Wn = W - np.linalg.solve(Gd, g).reshape(3, w)
-            out = residuals(Wn)
-            new = loss(out[0], out[1])
-            if np.isfinite(new) and new < cur:
-                W, cur, lam = Wn, new, lam / 3
-                rp, rn, Su, Sv, nrm, c = out
-                break
-            lam *= 10
-        else:
-            break
-    net.W3[...] = W.astype(net.dtype)
-    return cur
-
-
-def _ridge_readout(net, target, rng, n=8192, rel_reg=1e-6):
-    """Set W3 (and b3) to the regularised least-squares read-out of the initial features."""
-    p, q, _ = target.sample(n, rng)
-    net.fit_readout(p, q, rel_reg=rel_reg)
-
-
 def _evaluate(surface, target, n_eval):
     """Held-out errors at n_eval fixed sphere points (seeded apart from training)."""
     g = np.random.default_rng(2**31 - 1)
@@ -866,44 +552,3 @@ def _evaluate(surface, target, n_eval):
                      .mean())), position_max=float(err.max()),
                      bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(ang.mean()),
                      normal_max_deg=float(ang.max()))
-
-
-def _resume_key(target, options, net):
-    """What a checkpoint must match to be resumed: the planned FitOptions' resume key, the
-    target and the warm start."""
-    keep = options.resume_key()
-    keep["smooth"] = getattr(target, "smooth", None)
-    keep["target"] = target.fingerprint
-    keep["warm_start"] = None if net is None else _fingerprint(net.theta, None)
-    return json.dumps(keep, sort_keys=True, default=str)
-
-
-def _save_checkpoint(path, net, opt, rng_state, step, history, seconds, key, target, metadata):
-    surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
-                                     metadata=dict(metadata or {}))
-    arrays = surface.state()
-    arrays.update({f"opt.{k}": v for k, v in opt.state_dict().items()})
-    arrays.update({
-        "checkpoint.step": np.array(step), "checkpoint.seconds": np.array(seconds),
-        "checkpoint.key": np.array(key),
-        "checkpoint.rng": np.array(json.dumps(rng_state)),
-    })
-    arrays.update({f"checkpoint.history.{k}": np.asarray(v) for k, v in history.items()})
-    save_npz(path, arrays)
-
-
-def _load_checkpoint(path, key):
-    with load_npz(path) as data:
-        if "checkpoint.key" not in data:
-            raise ModelFileError(f"{path} is not a fit checkpoint (no checkpoint fields)")
-        if str(data["checkpoint.key"]) != key:
-            raise ModelFileError(
-                f"{path} is a checkpoint of a different fit (other target or options); "
-                f"delete it or pass another checkpoint path")
-        surface = SphericalNeuralSurface.from_state(data, source=str(path))
-        opt = {k[4:]: data[k] for k in data.files if k.startswith("opt.")}
-        history = {k[len("checkpoint.history."):]: list(data[k]) for k in data.files
-                   if k.startswith("checkpoint.history.")}
-        return {"net": surface.net, "opt": opt, "step": int(data["checkpoint.step"]),
-                "seconds": float(data["checkpoint.seconds"]), "history": history,
-                "rng": json.loads(str(data["checkpoint.rng"]))}

@@ -1,0 +1,141 @@
+"""What a fit left to "auto" becomes: the target's detail, the choices made from it, the
+step-time probe and the learning-rate schedules (on the step count or on the clock)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..geometry import tangent_frame
+from ..nn.mlp import ResidualMLP
+from ..nn.optim import Schedule
+from ..options import AUTO, DETAIL_RANGE
+from ..sampling import uniform_sphere
+
+#: the most steps a fit with no step count takes (it normally stops on its time budget)
+_MAX_AUTO_STEPS = 1_000_000
+
+
+class _ClockCosine:
+    """A cosine schedule on the clock: the warm-up of ``base`` over its first steps, then the
+    decay from ``lr`` to ``lr_min`` over the fraction of ``budget`` seconds elapsed."""
+
+    kind = "cosine-clock"
+
+    def __init__(self, base, clock, budget):
+        self.base, self.clock, self.budget = base, clock, float(budget)
+
+    def __call__(self, t):
+        b = self.base
+        lr = b.cosine_at(min(self.clock() / self.budget, 1.0))
+        if b.warmup and t < b.warmup:
+            lr *= (t + 1) / b.warmup
+        return float(lr)
+
+
+def _auto_values(d):
+    """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1)."""
+    lo, hi = DETAIL_RANGE
+    t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
+    a, b = AUTO["smooth"], AUTO["detailed"]
+    vals = {k: float(a[k] ** (1 - t) * b[k] ** t) for k in a}
+    if t in (0.0, 1.0):
+        vals = dict(a if t == 0.0 else b)
+    return vals, t
+
+
+def detail(target, width=256, depth=8, n=4096, seed=12345):
+    """How much detail a target has: the held-out RMS error (normalised units) of the best
+    linear read-out of the scale-4 features of a fresh reference network (256 x 8, whatever
+    the network being fitted).
+
+    Smooth shapes are nearly linear in those features (the built-in ellipsoid: 3.5e-3); meshes
+    with ears, horns and faces are not (spot: 4.8e-2). It costs one forward pass of ``n``
+    points and a ``width x width`` solve, and draws from its own generator, so it does not
+    change a fit's random stream.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Bobble, Ellipsoid
+    >>> from sns_np.surface._targets import _ShapeTarget
+    >>> smooth = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7)))
+    >>> bumpy = detail(_ShapeTarget(Bobble()))
+    >>> bool(smooth < DETAIL_RANGE[0]), bool(bumpy > DETAIL_RANGE[1])
+    (True, True)
+    """
+    g = np.random.default_rng(seed)
+    net = ResidualMLP(width=width, depth=depth, seed=g, input_scale=4.0)
+    p, q, _ = target.sample(2 * n, g)
+    n = len(p) // 2                      # a target with a finite pool may return fewer
+    if n < 16:
+        raise ValueError(f"detail: the target returned {len(p)} samples; need at least 32")
+    feats = net.features(p)
+    G = feats[:n].T @ feats[:n]
+    G[np.diag_indices_from(G)] += 1e-6 * np.trace(G) / G.shape[0]
+    W = np.linalg.solve(G, feats[:n].T @ q[:n])
+    r = feats[n:2 * n] @ W - q[n:2 * n]
+    return float(np.sqrt((r ** 2).sum(axis=1).mean()))
+
+
+def _plan(target, o, net, elapsed=0.0):
+    """Fill the options left to "auto" (None) from the target's detail; returns the choices
+    made (option -> {"value", "why"})."""
+    choices = {}
+    if net is not None:
+        # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
+        for k in ("lr", "warmup", "batch"):
+            if o[k] is None:
+                o[k] = AUTO["smooth"][k]
+    todo = [k for k in ("input_scale", "lr", "warmup", "batch")
+            if o[k] is None and net is None]
+    if o["steps"] is None and o["time_budget"] is None:
+        todo.append("time_budget")
+    if todo:
+        d = detail(target)
+        vals, t = _auto_values(d)
+        kind = "smooth" if t == 0 else "detailed" if t == 1 else f"between ({t:.2f})"
+        choices["detail"] = {"value": d, "why": f"{kind}: read-out error of scale-4 features; "
+                             f"smooth <= {DETAIL_RANGE[0]:g}, detailed >= {DETAIL_RANGE[1]:g}"}
+        for k in todo:
+            v = vals[k]
+            if k == "time_budget":
+                v = max(v - elapsed, 10.0)
+            elif k in ("warmup", "batch"):
+                v = int(round(v))
+            o[k] = v
+            choices[k] = {"value": v, "why": f"{kind} target"
+                          + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
+                             if k == "time_budget" and elapsed else "")}
+    if o["steps"] is None:
+        choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
+                            "learning rate decays with the time elapsed"}
+    return choices
+
+
+def _probe_step_time(o, repeats=2):
+    """Seconds per training step of the options' (FitOptions) network and batch, measured on
+    this machine (a fresh network, random points: about a second)."""
+    g = np.random.default_rng(0)
+    net = ResidualMLP(width=o.width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
+    # an automatic batch is not known yet: the smallest it can be (lenient)
+    batch = o.batch or min(end["batch"] for end in AUTO.values())
+    p = uniform_sphere(batch, g)
+    pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
+
+    def loss_fn(y, JD, sl):
+        return float((y * y).sum()), 2 * y, np.zeros_like(JD)
+
+    net.value_and_grad(pc, loss_fn, order=1, directions=R)      # compiles on a first call
+    t = time.perf_counter()
+    for _ in range(repeats):
+        net.value_and_grad(pc, loss_fn, order=1, directions=R)
+    return (time.perf_counter() - t) / repeats
+
+
+def _schedule(o):
+    if o["schedule"] == "constant":
+        return Schedule("constant", o["lr"], warmup=o["warmup"])
+    return Schedule("cosine", o["lr"], total=o["steps"] or _MAX_AUTO_STEPS, lr_min=o["lr_min"],
+                    warmup=o["warmup"])
+

@@ -1,0 +1,89 @@
+"""What a fit samples: a mesh through its spherical embedding, or an analytic surface map.
+
+A target gives sphere points ``p`` with their surface points ``q`` and unit normals, in the
+normalised frame (centred at the area centroid, scaled to area 4 pi), plus the frame itself
+(``center``, ``scale``), the bounding-box diagonal and a fingerprint that a checkpoint must
+match.
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+
+from ..geometry import tangent_frame
+from ..sampling import uniform_sphere
+from .losses import normals_from_tangents
+
+
+class _MeshTarget:
+    """Samples of a mesh and its spherical embedding, in the normalised frame."""
+
+    def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong"):
+        from .. import mesh
+        V = np.asarray(V, dtype=np.float64)
+        F = np.asarray(F)
+        if check:
+            mesh.check(V, F)
+        if Vs is None:
+            Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
+        self.corr = mesh.Correspondence(V, F, Vs)
+        areas = mesh.face_areas(V, F)
+        self.area = float(areas.sum())
+        self.center = (areas[:, None] * V[F].mean(axis=1)).sum(axis=0) / self.area
+        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
+        self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+        self.fingerprint = _fingerprint(V, F)
+        self.smooth = smooth
+
+    def _targets(self, face, beta):
+        q, nrm = self.corr.to_mesh(face, beta)
+        if self.smooth == "phong":
+            q = self.corr.phong_point(face, beta)
+        return (q - self.center) / self.scale, nrm
+
+    def sample(self, n, rng):
+        face, beta = self.corr.sample_barycentric(n, rng)
+        return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
+
+    def evaluate_at(self, p):
+        return self._targets(*self.corr.locate(p))
+
+
+class _ShapeTarget:
+    """Samples of an analytic surface map S(p), uniform on the parameter sphere."""
+
+    def __init__(self, shape):
+        from ..protocol import surface_jet
+        from ..quadrature import sphere_quadrature
+        self.shape = shape
+        P, w = sphere_quadrature(96)
+        y, J = surface_jet(shape, P, 1)
+        JR = np.einsum("kia,kab->kib", J, tangent_frame(P))
+        dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1) * w
+        self.area = float(dA.sum())
+        self.center = (dA[:, None] * y).sum(axis=0) / self.area
+        self.scale = float(np.sqrt(self.area / (4 * np.pi)))
+        self.bbox_diagonal = float(np.linalg.norm(y.max(axis=0) - y.min(axis=0)))
+        self.fingerprint = f"shape:{type(shape).__name__}:{_fingerprint(y[:64], None)}"
+
+    def sample(self, n, rng):
+        p = uniform_sphere(n, rng)
+        q, nrm = self.evaluate_at(p)
+        return p, q, nrm
+
+    def evaluate_at(self, p):
+        from ..protocol import surface_jet
+        y, J = surface_jet(self.shape, p, 1)
+        JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
+        nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
+        return (y - self.center) / self.scale, nrm
+
+
+def _fingerprint(V, F):
+    h = hashlib.sha256(np.ascontiguousarray(V, dtype=np.float64).tobytes())
+    if F is not None:
+        h.update(np.ascontiguousarray(F, dtype=np.int64).tobytes())
+    return h.hexdigest()[:16]
+
