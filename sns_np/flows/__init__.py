@@ -10,9 +10,13 @@ stability_limit         ``A / (2 pi N)``, the largest stable step
                         (the same for every scheme)
 amplification           ``R(z)``, the factor by which one step of a scheme
                         multiplies a heat eigenmode
-HeatOptions, MCFOptions  the options of the two flows: defaults, help and checks
-fit_sdf                 a SphericalNeuralSurface on the zero set of a signed distance function
-                        (also ``SphericalNeuralSurface.fit_sdf``); an :class:`SDFFitReport`
+
+HeatOptions             the options of the heat flow: defaults, help and checks
+MCFOptions              the options of the mean curvature flow
+
+``fit_sdf``, ``SDFFitReport`` and ``project_to_zero_set`` (a SphericalNeuralSurface on the zero
+set of a signed distance function) live in :mod:`sns_np.surface` and are importable from here
+too.
 
 The equations are mapped to the code, and the accuracy measured, in ``docs/flows.md``.
 """
@@ -20,9 +24,9 @@ The equations are mapped to the code, and the accuracy measured, in ``docs/flows
 from ._common import SCHEMES, StabilityWarning, amplification, stability_limit
 from .heat import HEAT_DEFAULTS, HeatFlowResult, HeatOptions, ModalField, heat_flow
 from .mcf import MCF_DEFAULTS, MCFOptions, MeanCurvatureFlowResult, mean_curvature_flow
-from .sdf import SDFFitReport, fit_sdf, project_to_zero_set
+from .sdf import SDFFitReport, fit_sdf, project_to_zero_set  # noqa: F401  (from surface)
 
 __all__ = ["heat_flow", "HeatFlowResult", "HeatOptions", "ModalField", "HEAT_DEFAULTS",
            "mean_curvature_flow", "MeanCurvatureFlowResult", "MCFOptions", "MCF_DEFAULTS",
-           "fit_sdf", "SDFFitReport", "project_to_zero_set", "StabilityWarning",
+           "StabilityWarning",
            "stability_limit", "amplification", "SCHEMES"]

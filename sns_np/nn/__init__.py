@@ -2,6 +2,7 @@
 
 ResidualMLP     the network: forward jets (value, J, D2, directional), reverse-mode gradients,
                 the least-squares fit of its read-out layer
+
 Adam, RMSProp, SGD, Schedule    optimisers and learning-rate schedules on flat vectors
 scipy_objective                 ``fun(theta) -> (loss, grad)`` for scipy.optimize.minimize
 """

@@ -4,6 +4,7 @@ SphericalNeuralSurface   network + output transform; a surface map; save/load; t
 fit_mesh, fit_shape      fitting to a mesh or an analytic map (also as class methods)
 FitReport                what a fit did and its held-out errors
 FitOptions               the fitting options: defaults, help, checks, resume key
+
 fit_sdf                  fitting to the zero set of a signed distance function (also a class
                          method; re-exported by :mod:`sns_np.flows`)
 """
