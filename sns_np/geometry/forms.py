@@ -211,7 +211,7 @@ def second_fundamental_form_from_jets(S2: np.ndarray, n: np.ndarray) -> np.ndarr
 def _principal(I, II):
     """kmin, kmax, the kmax eigen-angle psi, and ``U^-1 = [[al, be], [0, ga]]`` (``I = U^T U``).
 
-    ``M = U^-T II U^-1`` is symmetric with the eigenvalues of ``I^-1 II``; written out by
+    ``B = U^-T II U^-1`` is symmetric with the eigenvalues of ``I^-1 II``; written out by
     components because batched 2 x 2 einsums cost more than the arithmetic.
     """
     E, F, G = I[:, 0, 0], 0.5 * (I[:, 0, 1] + I[:, 1, 0]), I[:, 1, 1]
@@ -260,7 +260,7 @@ def principal_from_jets(JR: np.ndarray, II: np.ndarray):
     """Principal curvatures and unit principal directions in R^3.
 
     ``JR U^-1`` is an orthonormal basis ``T`` of the tangent plane (Gram-Schmidt of
-    ``S_u, S_v``); eigenvectors ``v`` of ``M = U^-T II U^-1`` give ``d = T v``. The pair is
+    ``S_u, S_v``); eigenvectors ``v`` of ``B = U^-T II U^-1`` give ``d = T v``. The pair is
     right-handed with the normal: ``dmin x dmax = n``. At umbilics (``kmin = kmax``) any
     orthonormal pair is principal; the one returned then depends on the frame.
 

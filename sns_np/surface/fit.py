@@ -3,7 +3,7 @@
 The network is trained in a normalised frame (surface centred at its area centroid and scaled
 to area 4 pi) on fresh random samples every step:
 
-    L = 1/N sum |net(p_i) - q_i|^2 + w_n 1/N sum |n(p_i) - n_i|^2
+    loss = 1/N sum |net(p_i) - q_i|^2 + w_n 1/N sum |n(p_i) - n_i|^2
 
 where q_i is the target point that corresponds to the sphere point p_i and n_i the target's
 unit normal. The two tangent derivatives that the normal needs come from a 3-stream

@@ -6,7 +6,7 @@ turns those into parameter gradients.
 
 Position + normal loss (paper, section 3.1):
 
-    L = 1/N sum |S(p_i) - q_i|^2 + lambda 1/N sum |n(p_i) - n_i|^2
+    loss = 1/N sum |S(p_i) - q_i|^2 + lambda 1/N sum |n(p_i) - n_i|^2
     n = c / |c|,  c = S_u x S_v,  S_u = J e_u, S_v = J e_v
 
 Cotangents, with g = dL/dc:
