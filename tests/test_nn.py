@@ -47,6 +47,29 @@ def test_softplus_kernel_matches_numpy_reference():
     assert np.allclose([s[0], s1[0], s2[0], s3[0]], [np.log(2), 0.5, 0.25, 0.0])
 
 
+def test_float32_kernels_flush_what_float32_cannot_resolve():
+    """float32 flushes softplus and sigmoid below z = -_FLUSH_Z32 and first-order streams and
+    cotangents below _FLUSH_BAR32 (no subnormal reaches a matrix product); float64 keeps them."""
+    z = np.array([[-60.0, -45.0, -39.0, 0.5]])
+    for dt, flushed in ((np.float32, [True, True, False, False]),
+                        (np.float64, [False, False, False, False])):
+        out = np.empty_like(z, dtype=dt)
+        K.softplus_values(z.astype(dt), out)
+        assert ((out == 0)[0] == flushed).all()
+        assert np.allclose(out[out != 0], softplus(z)[out != 0], rtol=1e-6)
+        # reverse pass: sigmoid(-30) * 1e-8 = 9e-22 is flushed in float32 only
+        c, m, w = 1, 2, 3
+        Zs = np.zeros((c, 1 + m, w), dt)
+        Zs[0, 0] = [-30.0, 0.0, 1.0]
+        sig = (1 / (1 + np.exp(-Zs[:, 0, :].astype(np.float64)))).astype(dt)
+        Abar = np.full((c, 1 + m, w), 1e-8, dt)
+        Zbar = np.empty_like(Abar)
+        K.softplus_jet_back(Zs, sig, Abar, Zbar, m)
+        assert (Zbar[0, :, 0] == 0).all() == (dt == np.float32)
+        assert (Zbar[0, :, 1:] != 0).all()
+        assert np.allclose(Zbar[0, 1:, 1:], sig[0, 1:] * 1e-8, rtol=1e-6)
+
+
 def test_fused_jet_kernel_against_formula():
     g = np.random.default_rng(3)
     c, m, k, w = 5, 3, 2, 37

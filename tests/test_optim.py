@@ -38,6 +38,48 @@ def test_adam_first_two_steps_by_hand():
     assert np.allclose(theta, expected, rtol=1e-12)
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_adam_fused_update_matches_the_formula(dtype):
+    """Long vectors take the fused Numba update; three steps against the formula in float64."""
+    from sns_np.nn.optim import _FUSED_MIN
+    g = np.random.default_rng(7)
+    n = _FUSED_MIN + 5
+    theta0 = g.standard_normal(n)
+    grads = [g.standard_normal(n) * 10.0 ** g.uniform(-6, 1, n) for _ in range(3)]
+    theta = theta0.astype(dtype)
+    opt = Adam(lr=0.01, betas=(0.9, 0.999), eps=1e-8)
+    m = v = np.zeros(n)
+    expected = theta0.copy()
+    for t, gt in enumerate(grads, start=1):
+        opt.step(theta, gt.astype(dtype))
+        m = 0.9 * m + 0.1 * gt
+        v = 0.999 * v + 0.001 * gt ** 2
+        expected -= 0.01 * (m / (1 - 0.9 ** t)) / (np.sqrt(v / (1 - 0.999 ** t)) + 1e-8)
+    # float32: theta (about 1) is rounded at every step, a few units of 6e-8
+    tol = 1e-13 if dtype == np.float64 else 1e-6
+    assert theta.dtype == dtype
+    assert np.abs(theta - expected).max() < tol
+
+
+def test_adam_float32_moments_never_subnormal():
+    """A gradient that has died out leaves zero moments in float32, not subnormal ones."""
+    from sns_np.nn.optim import _FUSED_MIN
+    n = _FUSED_MIN
+    tiny = np.finfo(np.float32).tiny
+    theta = np.ones(n, np.float32)
+    opt = Adam(lr=1e-3)
+    grad = np.full(n, 1e-15, np.float32)          # g^2 = 1e-30: normal
+    opt.step(theta, grad)
+    grad[:] = 1e-21                               # g^2 = 1e-42 would be subnormal
+    for _ in range(3):
+        opt.step(theta, grad)
+    m, v = opt.state_dict()["m"], opt.state_dict()["v"]
+    for moment in (m, v):
+        assert not ((moment != 0) & (np.abs(moment) < tiny)).any()
+    assert (v > 0).all()                          # the normal part of v is kept
+    assert np.isfinite(theta).all()
+
+
 def test_rmsprop_with_momentum_by_hand():
     theta = np.zeros(4)
     opt = RMSProp(lr=0.01, alpha=0.99, eps=1e-8, momentum=0.9)

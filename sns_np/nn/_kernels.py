@@ -34,6 +34,7 @@ exp(-708) ~ 3e-308 (an absolute error below 1e-307 on softplus and sigmoid).
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 
@@ -54,11 +55,33 @@ _SJIT = dict(_JIT, nogil=True)  # serial kernels that worker threads run side by
 _NBLK = 64
 
 #: softplus(z) and sigmoid(z) are flushed to 0 for z < -_FLUSH_Z (where both are below 1e-30,
-#: an absolute change of less than 1e-30). Without it, the hidden layers of a network with a
-#: large first-layer scale (fitting detailed meshes, input_scale 40) carry float32 subnormals
-#: (below 1.2e-38, z < -87) into the matrix products, which run 1.4x slower on them
-#: (docs/performance.md).
+#: an absolute change of less than 1e-30), and in float32 already for z < -_FLUSH_Z32 (below
+#: 4.3e-18, under float32's resolution of the O(1) features beside them). Without it, the
+#: hidden layers of a network with a large first-layer scale (fitting detailed meshes,
+#: input_scale 40) carry float32 subnormals (below 1.2e-38, z < -87) into the matrix products,
+#: which run 1.4x slower on them (docs/performance.md).
 _FLUSH_Z = 69.0
+_FLUSH_Z32 = 40.0
+
+#: float32 only: first-order streams and reverse-pass cotangents below this in magnitude are
+#: flushed to 0. A fit drives some units far negative; the products of their small sigmoids
+#: along the layers are subnormal, and the weight-gradient products then run on them: a
+#: training step of the network fitted to FLOWER took 157 ms against 68 ms for a fresh one,
+#: 65 ms with the flush (docs/performance.md). Adam's eps (1e-8) makes a gradient this small
+#: move its weight by less than 1e-9 of the rate, so training does not see the change.
+_FLUSH_BAR32 = 1e-20
+
+
+@njit(inline="always", **_JIT)
+def _flush_z(x):
+    """The z below which softplus and sigmoid are flushed, for the dtype of array x."""
+    return _FLUSH_Z32 if x.itemsize == 4 else _FLUSH_Z
+
+
+@njit(inline="always", **_JIT)
+def _flush_bar(x):
+    """The magnitude below which streams and cotangents are flushed, for x's dtype."""
+    return _FLUSH_BAR32 if x.itemsize == 4 else 0.0
 
 
 _start_lock = threading.Lock()
@@ -114,6 +137,7 @@ def _exp_parts(z, p, ib):
 @njit(inline="always", **_JIT)
 def _softplus_sigmoid(z, p, fb, a, sig, s2):
     """a = softplus(z), sig = sigmoid(z), s2 = sig (1 - sig), from the parts of exp(-|z|)."""
+    fz = _flush_z(z)
     for j in range(z.shape[0]):
         e = p[j] * fb[j]
         u = e / (2.0 + e)
@@ -126,7 +150,7 @@ def _softplus_sigmoid(z, p, fb, a, sig, s2):
         q = 1.0 / (1.0 + e)
         sj = q * (e if zj < 0.0 else 1.0)
         aj = max(zj, 0.0) + lg
-        if zj < -_FLUSH_Z:      # below 1e-30: flushed, see _FLUSH_Z
+        if zj < -fz:            # flushed, see _FLUSH_Z
             sj = 0.0
             aj = 0.0
         a[j] = aj
@@ -143,7 +167,7 @@ def softplus_values(z, out):
         ib = np.empty(w, np.int64)
         sig = np.empty(w)
         s2 = np.empty(w)
-        zi = np.empty(w)
+        zi = np.empty(w, z.dtype)
         for j in range(w):
             zi[j] = z[i, j]
         _exp_parts(zi, p, ib)
@@ -173,6 +197,7 @@ def _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, lo, hi):
     s1 = np.empty(w)
     s2 = np.empty(w)
     a0 = np.empty(w)
+    fb_ = _flush_bar(out)
     for i in range(lo, hi):
         if has_res:
             for s in range(1 + m):
@@ -198,7 +223,8 @@ def _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, lo, hi):
                 q += 1
         for a in range(m):
             for j in range(w):
-                out[i, 1 + a, j] = s1[j] * Z[i, 1 + a, j]
+                d = s1[j] * Z[i, 1 + a, j]
+                out[i, 1 + a, j] = d if abs(d) >= fb_ else 0.0
         for j in range(w):
             out[i, 0, j] = a0[j]
             sig[i, j] = s1[j]
@@ -236,16 +262,19 @@ def _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, lo, hi):
     """
     w = Z.shape[2]
     acc = np.empty(w)
+    fb_ = _flush_bar(Zbar)
     for i in range(lo, hi):
         acc[:] = 0.0
         for a in range(m):
             for j in range(w):
                 g = Abar[i, 1 + a, j]
                 acc[j] += g * Z[i, 1 + a, j]
-                Zbar[i, 1 + a, j] = sig[i, j] * g
+                zb = sig[i, j] * g
+                Zbar[i, 1 + a, j] = zb if abs(zb) >= fb_ else 0.0
         for j in range(w):
             s = sig[i, j]
-            Zbar[i, 0, j] = s * Abar[i, 0, j] + s * (1.0 - s) * acc[j]
+            zb = s * Abar[i, 0, j] + s * (1.0 - s) * acc[j]
+            Zbar[i, 0, j] = zb if abs(zb) >= fb_ else 0.0
 
 
 @njit(**_PJIT)
@@ -455,3 +484,36 @@ def small_vjp(x, D, W0, b0, W1, b1, W2, b2, W3, b3, has_bias, m, Ybar,
                     else:
                         for j in range(d):
                             gW0[t, r, j] += g * D[i, j, s - 1]
+
+
+# ---------------------------------------------------------------------------------------------
+# Optimiser update
+# ---------------------------------------------------------------------------------------------
+
+@njit(**_PJIT)
+def adam_update(theta, g, m, v, lr_hat, b1, b2, vhat_scale, eps):
+    """One fused Adam update in place (:class:`sns_np.nn.optim.Adam`), one pass over memory:
+
+        m = b1 m + (1 - b1) g;   v = b2 v + (1 - b2) g^2
+        theta -= lr_hat m / (sqrt(v vhat_scale) + eps)
+
+    in float64 arithmetic, stored in the arrays' dtype. In float32, moments below float32's
+    smallest normal number are stored as 0: weights whose gradient has died out would
+    otherwise carry subnormal moments, on which every later update runs several times slower
+    (their update is below 1e-30 of the rate either way).
+    """
+    n = theta.shape[0]
+    tiny = 1.1754943508222875e-38 if theta.itemsize == 4 else 0.0
+    nblk = min(n, _NBLK)
+    for t in prange(nblk):
+        for i in range((n * t) // nblk, (n * (t + 1)) // nblk):
+            gi = float(g[i])
+            mi = b1 * m[i] + (1.0 - b1) * gi
+            vi = b2 * v[i] + (1.0 - b2) * (gi * gi)
+            if abs(mi) < tiny:
+                mi = 0.0
+            if vi < tiny:
+                vi = 0.0
+            m[i] = mi
+            v[i] = vi
+            theta[i] -= lr_hat * mi / (math.sqrt(vi * vhat_scale) + eps)

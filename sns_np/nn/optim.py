@@ -145,6 +145,10 @@ def _as_schedule(lr):
 
 # ------------------------------------------------------------------------------ optimisers
 
+#: parameter vectors at least this long are updated by a fused Numba kernel (Adam): one pass
+#: over memory instead of eight NumPy passes (docs/performance.md)
+_FUSED_MIN = 4096
+
 class Optimizer:
     """Base class: holds the schedule, the step count and named state arrays.
 
@@ -312,12 +316,18 @@ class Adam(Optimizer):
     def _update(self, theta, g, lr):
         m, v = self._buffers(theta)
         t = self.t + 1
+        mhat_scale = 1.0 / (1.0 - self.b1 ** t)
+        vhat_scale = 1.0 / (1.0 - self.b2 ** t)
+        if theta.ndim == 1 and theta.flags.c_contiguous and theta.size >= _FUSED_MIN:
+            from ._kernels import adam_update, start_threads   # one pass over memory
+            start_threads()
+            adam_update(theta, g, m, v, lr * mhat_scale, self.b1, self.b2, vhat_scale,
+                        self.eps)
+            return
         m *= self.b1
         m += (1.0 - self.b1) * g
         v *= self.b2
         v += (1.0 - self.b2) * (g * g)
-        mhat_scale = 1.0 / (1.0 - self.b1 ** t)
-        vhat_scale = 1.0 / (1.0 - self.b2 ** t)
         theta -= (lr * mhat_scale) * m / (np.sqrt(v * vhat_scale) + self.eps)
 
 
