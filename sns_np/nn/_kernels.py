@@ -67,8 +67,8 @@ _FLUSH_Z32 = 40.0
 #: flushed to 0. A fit drives some units far negative; the products of their small sigmoids
 #: along the layers are subnormal, and the weight-gradient products then run on them: a
 #: training step of the network fitted to FLOWER took 157 ms against 68 ms for a fresh one,
-#: 65 ms with the flush (docs/performance.md). Adam's eps (1e-8) makes a gradient this small
-#: move its weight by less than 1e-9 of the rate, so training does not see the change.
+#: 65 ms with the flush (docs/performance.md). A flushed cotangent contributes under 1e-15 to
+#: a weight's gradient, which Adam (eps 1e-8) turns into less than 1e-7 of the rate.
 _FLUSH_BAR32 = 1e-20
 
 
