@@ -5,6 +5,7 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
+from sns_np.options import NORMAL_WEIGHT
 from sns_np.shapes import Ellipsoid
 from sns_np.surface import SphericalNeuralSurface, fit_mesh, fit_shape, position_normal_loss
 from sns_np.testing import check_directional_jet, check_jet
@@ -88,6 +89,22 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     assert np.mean(np.linalg.norm(S(p) - E.jet(p, 0), axis=1)) < 0.05  # in E's units
     assert np.isclose(S.scale, np.sqrt(S.metadata["area"] / (4 * np.pi)))
     assert S.net.dtype == np.float64 and len(r.history["loss"]) == 6
+
+
+def test_normal_weight_follows_the_parametrisation():
+    """Auto: 0.1 for an analytic map (exact parametrisation), 1 for a mesh (an embedding);
+    an explicit weight is kept. All recorded in the report's options and choices."""
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    tiny = {k: v for k, v in TINY.items() if k != "normal_weight"}
+    _, r = fit_shape(E, steps=2, **tiny)
+    assert r.options["normal_weight"] == NORMAL_WEIGHT["exact"] == 0.1
+    assert "exact" in r.choices["normal_weight"]["why"]
+    V, F = E.mesh(2)
+    _, r = fit_mesh(V, F, steps=2, **tiny)
+    assert r.options["normal_weight"] == NORMAL_WEIGHT["embedding"] == 1.0
+    assert r.choices["normal_weight"]["value"] == 1.0
+    _, r = fit_shape(E, steps=2, normal_weight=0.5, **tiny)
+    assert r.options["normal_weight"] == 0.5 and "normal_weight" not in r.choices
 
 
 @pytest.mark.slow_nojit

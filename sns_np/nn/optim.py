@@ -319,7 +319,8 @@ class Adam(Optimizer):
         mhat_scale = 1.0 / (1.0 - self.b1 ** t)
         vhat_scale = 1.0 / (1.0 - self.b2 ** t)
         if theta.ndim == 1 and theta.flags.c_contiguous and theta.size >= _FUSED_MIN:
-            from ._kernels import adam_update, start_threads   # one pass over memory
+            # one pass over memory, on Numba's threads
+            from ._kernels import adam_update, start_threads
             start_threads()
             adam_update(theta, g, m, v, lr * mhat_scale, self.b1, self.b2, vhat_scale,
                         self.eps)

@@ -10,7 +10,7 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, DETAIL_RANGE
+from ..options import AUTO, DETAIL_RANGE, NORMAL_WEIGHT
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
@@ -107,6 +107,14 @@ def _plan(target, o, net, elapsed=0.0):
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")}
+    if o["normal_weight"] is None:
+        kind = getattr(target, "parametrisation", "embedding")
+        o["normal_weight"] = NORMAL_WEIGHT[kind]
+        choices["normal_weight"] = {
+            "value": o["normal_weight"],
+            "why": "an exact parametrisation (an analytic map): the position term leads"
+                   if kind == "exact" else "a parametrisation through a spherical embedding: "
+                   "the normals steer the fit past its tangential noise"}
     if o["steps"] is None:
         choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
                             "learning rate decays with the time elapsed"}

@@ -20,6 +20,9 @@ from .losses import normals_from_tangents
 class _MeshTarget:
     """Samples of a mesh and its spherical embedding, in the normalised frame."""
 
+    #: how the sphere maps to the target (the automatic normal weight depends on it)
+    parametrisation = "embedding"
+
     def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong"):
         from .. import mesh
         V = np.asarray(V, dtype=np.float64)
@@ -53,6 +56,8 @@ class _MeshTarget:
 
 class _ShapeTarget:
     """Samples of an analytic surface map S(p), uniform on the parameter sphere."""
+
+    parametrisation = "exact"
 
     def __init__(self, shape):
         from ..protocol import surface_jet

@@ -74,7 +74,7 @@ class FitReport:
     >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
-    ['detail', 'input_scale', 'lr', 'warmup']
+    ['detail', 'input_scale', 'lr', 'normal_weight', 'warmup']
     """
 
     steps: int = 0
@@ -243,7 +243,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     ----------
     target : object with ``sample(n, rng) -> (p, q, normals)`` and ``evaluate_at(p) -> (q,
         normals)`` in the normalised frame, and attributes ``center``, ``scale``,
-        ``bbox_diagonal``, ``fingerprint``
+        ``bbox_diagonal``, ``fingerprint``; optionally ``parametrisation``, ``"exact"``
+        for an analytic map (the default normal weight depends on it; any other target is
+        treated as a mesh's ``"embedding"``)
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
@@ -263,9 +265,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         ``optimizer="rmsprop", lr=1e-4, schedule="constant", normal_weight=1e-4`` reproduces
         the reference's settings.
     normal_weight : float
-        Weight of the normal term (the reference's 1e-4 leaves the normals to the position
-        term, which on a mesh is dominated by the tangential error of the spherical
-        embedding: docs/fitting.md measures both).
+        Weight of the normal term. Default (``NORMAL_WEIGHT``): 1 for a mesh, where the
+        position term is dominated by the tangential error of the spherical embedding and the
+        reference's 1e-4 would leave nothing to steer past it; 0.1 for an analytic map, whose
+        parametrisation is exact and where weight 1 lets the network trade position for
+        normals. docs/fitting.md measures both.
     dtype : {"float32", "float64"}
         Training precision (the result is float64).
     init : {"ridge", "random"}
