@@ -68,6 +68,10 @@ def test_float32_kernels_flush_what_float32_cannot_resolve():
         assert (Zbar[0, :, 0] == 0).all() == (dt == np.float32)
         assert (Zbar[0, :, 1:] != 0).all()
         assert np.allclose(Zbar[0, 1:, 1:], sig[0, 1:] * 1e-8, rtol=1e-6)
+        # a NaN cotangent is never flushed: divergence must stay visible
+        Abar[0, 1, 0] = np.nan
+        K.softplus_jet_back(Zs, sig, Abar, Zbar, m)
+        assert np.isnan(Zbar[0, 1, 0]) and np.isnan(Zbar[0, 0, 0])
 
 
 def test_fused_jet_kernel_against_formula():

@@ -105,6 +105,13 @@ def test_normal_weight_follows_the_parametrisation():
     assert r.choices["normal_weight"]["value"] == 1.0
     _, r = fit_shape(E, steps=2, normal_weight=0.5, **tiny)
     assert r.options["normal_weight"] == 0.5 and "normal_weight" not in r.choices
+    # a target of fit_sampler that does not say "exact" is parametrised like a mesh
+    from sns_np.options import FitOptions
+    from sns_np.surface._plan import _plan
+    o = FitOptions(steps=1, batch=8, lr=1e-3, warmup=0, input_scale=4.0).to_dict()
+    unknown = type("Target", (), {"parametrisation": "something else"})()
+    _plan(unknown, o, net=None)
+    assert o["normal_weight"] == NORMAL_WEIGHT["embedding"]
 
 
 @pytest.mark.slow_nojit

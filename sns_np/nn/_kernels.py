@@ -224,7 +224,7 @@ def _softplus_jet_rows(Z, R, bias, out, sig, m, k, has_res, has_bias, lo, hi):
         for a in range(m):
             for j in range(w):
                 d = s1[j] * Z[i, 1 + a, j]
-                out[i, 1 + a, j] = d if abs(d) >= fb_ else 0.0
+                out[i, 1 + a, j] = 0.0 if abs(d) < fb_ else d     # NaN kept
         for j in range(w):
             out[i, 0, j] = a0[j]
             sig[i, j] = s1[j]
@@ -270,11 +270,11 @@ def _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, lo, hi):
                 g = Abar[i, 1 + a, j]
                 acc[j] += g * Z[i, 1 + a, j]
                 zb = sig[i, j] * g
-                Zbar[i, 1 + a, j] = zb if abs(zb) >= fb_ else 0.0
+                Zbar[i, 1 + a, j] = 0.0 if abs(zb) < fb_ else zb   # NaN kept
         for j in range(w):
             s = sig[i, j]
             zb = s * Abar[i, 0, j] + s * (1.0 - s) * acc[j]
-            Zbar[i, 0, j] = zb if abs(zb) >= fb_ else 0.0
+            Zbar[i, 0, j] = 0.0 if abs(zb) < fb_ else zb
 
 
 @njit(**_PJIT)

@@ -108,7 +108,8 @@ def _plan(target, o, net, elapsed=0.0):
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")}
     if o["normal_weight"] is None:
-        kind = getattr(target, "parametrisation", "embedding")
+        # "exact" for an analytic map; anything else is parametrised like a mesh
+        kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
         o["normal_weight"] = NORMAL_WEIGHT[kind]
         choices["normal_weight"] = {
             "value": o["normal_weight"],
