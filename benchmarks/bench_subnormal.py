@@ -33,12 +33,9 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from sns_np.geometry import tangent_frame  # noqa: E402
 from sns_np.nn import Adam, ResidualMLP  # noqa: E402
+from sns_np.nn.activations import softplus  # noqa: E402
 from sns_np.sampling import uniform_sphere  # noqa: E402
 from sns_np.surface import position_normal_loss  # noqa: E402
-
-
-def _softplus(z):
-    return np.maximum(z, 0) + np.log1p(np.exp(-np.abs(z)))
 
 
 def far_negative(net, p, fraction=0.2, band=(-65.0, -40.0), seed=1):
@@ -46,7 +43,7 @@ def far_negative(net, p, fraction=0.2, band=(-65.0, -40.0), seed=1):
     pre-activations in ``band`` (on average over ``p``) at every point of ``p``."""
     out = net.copy()
     g = np.random.default_rng(seed)
-    h = _softplus(p @ out.W0.T.astype(np.float64))
+    h = softplus(p @ out.W0.T.astype(np.float64))
     k = int(fraction * out.width)
     for blk in range(out.depth):
         units = g.choice(out.width, k, replace=False)
@@ -56,7 +53,7 @@ def far_negative(net, p, fraction=0.2, band=(-65.0, -40.0), seed=1):
         rows *= (g.uniform(*band, k) / u.mean(axis=0))[:, None]
         out.W1[blk][units] = rows.astype(out.dtype)
         W1, W2 = out.W1[blk].astype(np.float64), out.W2[blk].astype(np.float64)
-        h = _softplus(h + _softplus(h @ W1.T) @ W2.T)
+        h = softplus(h + softplus(h @ W1.T) @ W2.T)
     return out
 
 
