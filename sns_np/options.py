@@ -36,8 +36,8 @@ from dataclasses import dataclass
 from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
-           "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "MESH_SMOOTHING",
-           "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME",
+           "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "SAMPLINGS",
+           "MESH_SMOOTHING", "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME",
            "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
@@ -204,10 +204,14 @@ DETAIL_RANGE = (5e-3, 2e-2)
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
-               "batch": 2048},
+               "batch": 2048, "sampling": "area"},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512},
+                 "batch": 512, "sampling": "area"},
 }
+
+#: how a fit draws its training points: uniformly by area, or weighted by the recent error
+#: with importance weights (a mesh only; ``sns_np.surface._adaptive``)
+SAMPLINGS = ("area", "error")
 
 #: the weight of the normal loss that "auto" chooses, by how the target is parametrised: a
 #: mesh through its spherical embedding, whose tangential noise the normals steer the fit past
@@ -230,8 +234,9 @@ MESH_SMOOTHING = ("phong", "none")
 def _auto(name, unit=""):
     """How "auto" chooses option ``name``, with the values at either end (for help texts)."""
     s, d = AUTO["smooth"][name], AUTO["detailed"][name]
-    return (f"chosen from the target's detail, {s:g}{unit} for a smooth target, {d:g}{unit} "
-            f"for a detailed one")
+    fmt = "" if isinstance(s, str) else "g"
+    return (f"chosen from the target's detail, {s:{fmt}}{unit} for a smooth target, "
+            f"{d:{fmt}}{unit} for a detailed one")
 
 
 @dataclass(frozen=True)
@@ -277,6 +282,10 @@ class FitOptions(Options):
                            resume=True)
     warmup: int | None = option(None, f"steps of linear learning-rate warm-up "
                                 f"(default: {_auto('warmup')})", Int(0), resume=True)
+    sampling: str | None = option(
+        None, f"how training points are drawn: uniformly by area, or weighted by the recent "
+        f"error with importance weights, the same objective (a mesh only; default: "
+        f"{_auto('sampling')})", Choice(*SAMPLINGS), resume=True)
     normal_weight: float | None = option(
         None, f"weight of the normal loss (default: {NORMAL_WEIGHT['embedding']:g} for a mesh, "
         f"{NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is exact)",

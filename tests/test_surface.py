@@ -223,7 +223,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
-    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch"}
+    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
     assert r.options["input_scale"] == AUTO["smooth"]["input_scale"]

@@ -53,7 +53,8 @@ def _resume_key(target, options, net):
     return json.dumps(keep, sort_keys=True, default=str)
 
 
-def _save_checkpoint(path, net, opt, rng_state, step, history, seconds, key, target, metadata):
+def _save_checkpoint(path, net, opt, rng_state, step, history, seconds, key, target, metadata,
+                     sampler=None):
     surface = SphericalNeuralSurface(net, center=target.center, scale=target.scale,
                                      metadata=dict(metadata or {}))
     arrays = surface.state()
@@ -64,6 +65,8 @@ def _save_checkpoint(path, net, opt, rng_state, step, history, seconds, key, tar
         "checkpoint.rng": np.array(json.dumps(rng_state)),
     })
     arrays.update({f"checkpoint.history.{k}": np.asarray(v) for k, v in history.items()})
+    if sampler is not None:
+        arrays.update({f"checkpoint.sampler.{k}": v for k, v in sampler.state_dict().items()})
     save_npz(path, arrays)
 
 
@@ -79,7 +82,10 @@ def _load_checkpoint(path, key):
         opt = {k[4:]: data[k] for k in data.files if k.startswith("opt.")}
         history = {k[len("checkpoint.history."):]: list(data[k]) for k in data.files
                    if k.startswith("checkpoint.history.")}
+        sampler = {k[len("checkpoint.sampler."):]: data[k] for k in data.files
+                   if k.startswith("checkpoint.sampler.")}
         return {"net": surface.net, "opt": opt, "step": int(data["checkpoint.step"]),
+                "sampler": sampler,
                 "seconds": float(data["checkpoint.seconds"]), "history": history,
                 "rng": json.loads(str(data["checkpoint.rng"]))}
 

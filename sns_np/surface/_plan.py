@@ -34,12 +34,19 @@ class _ClockCosine:
         return float(lr)
 
 
+_SAMPLING_WHY = {
+    "area": ": uniform by area (the error is spread evenly)",
+    "error": ": more samples where the recent error is, weighted back to the same loss"}
+
+
 def _auto_values(d):
     """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1)."""
     lo, hi = DETAIL_RANGE
     t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
     a, b = AUTO["smooth"], AUTO["detailed"]
-    vals = {k: float(a[k] ** (1 - t) * b[k] ** t) for k in a}
+    # numbers on a log scale; a choice among names (sampling) from the nearer end
+    vals = {k: (a[k] if t < 0.5 else b[k]) if isinstance(a[k], str)
+            else float(a[k] ** (1 - t) * b[k] ** t) for k in a}
     if t in (0.0, 1.0):
         vals = dict(a if t == 0.0 else b)
     return vals, t
@@ -82,12 +89,21 @@ def _plan(target, o, net, elapsed=0.0):
     """Fill the options left to "auto" (None) from the target's detail; returns the choices
     made (option -> {"value", "why"})."""
     choices = {}
+    cells = hasattr(target, "sample_faces")        # a mesh: faces to weight by their error
+    if o["sampling"] == "error" and not cells:
+        raise ValueError("sampling='error' needs a mesh target (fit_mesh), whose faces carry "
+                         "the error; this target draws its points itself: use "
+                         "sampling='area'")
+    if o["sampling"] is None and not cells:
+        o["sampling"] = "area"
+        choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "
+                               "analytic map): no mesh faces to weight by their error"}
     if net is not None:
         # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
-        for k in ("lr", "warmup", "batch"):
+        for k in ("lr", "warmup", "batch", "sampling"):
             if o[k] is None:
                 o[k] = AUTO["smooth"][k]
-    todo = [k for k in ("input_scale", "lr", "warmup", "batch")
+    todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling")
             if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
@@ -106,7 +122,8 @@ def _plan(target, o, net, elapsed=0.0):
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
-                             if k == "time_budget" and elapsed else "")}
+                             if k == "time_budget" and elapsed else "")
+                          + (_SAMPLING_WHY[v] if k == "sampling" else "")}
     if o["normal_weight"] is None:
         # "exact" for an analytic map; anything else is parametrised like a mesh
         kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"

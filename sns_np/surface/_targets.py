@@ -33,6 +33,8 @@ class _MeshTarget:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs)
         areas = mesh.face_areas(V, F)
+        self.face_area = areas
+        self.face_centroid = V[F].mean(axis=1)
         self.area = float(areas.sum())
         self.center = (areas[:, None] * V[F].mean(axis=1)).sum(axis=0) / self.area
         self.scale = float(np.sqrt(self.area / (4 * np.pi)))
@@ -48,6 +50,12 @@ class _MeshTarget:
 
     def sample(self, n, rng):
         face, beta = self.corr.sample_barycentric(n, rng)
+        return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
+
+    def sample_faces(self, face, rng):
+        """Points uniform by area within the given faces ``(n,)``: ``(p, q, normals)``."""
+        from ..mesh import uniform_barycentric
+        beta = uniform_barycentric(len(face), rng)
         return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
 
     def evaluate_at(self, p):

@@ -42,6 +42,7 @@ from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constan
     FitOptions,
 )
 from ..sampling import uniform_sphere
+from ._adaptive import ErrorSampler
 from ._checkpoint import (
     _check_checkpoint_options,
     _CheckpointCadence,
@@ -74,7 +75,7 @@ class FitReport:
     >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
-    ['detail', 'input_scale', 'lr', 'normal_weight', 'warmup']
+    ['detail', 'input_scale', 'lr', 'normal_weight', 'sampling', 'warmup']
     """
 
     steps: int = 0
@@ -287,6 +288,12 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         chosen from the target's detail, in all, less the ``elapsed_before`` seconds already
         spent (the embedding). A ``steps`` that this budget cannot reach is refused before
         the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
+    sampling : {"area", "error"}
+        How training points are drawn: uniformly by area, or (a mesh only) with probability
+        that follows each patch's recent error, mixed with the uniform draw, each point
+        carrying the importance weight that keeps the expected loss the uniform one
+        (:mod:`sns_np.surface._adaptive`). Default: chosen from the target's detail
+        (``AUTO``, docs/fitting.md); ``"area"`` for an analytic map and a warm start.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md).
@@ -376,6 +383,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         opt = make_optimizer(o["optimizer"], _schedule(o))
         if state is not None:
             opt.load_state_dict(state["opt"])
+        sampler = ErrorSampler(target, o["batch"]) if o["sampling"] == "error" else None
+        if sampler is not None and state is not None:
+            sampler.load_state_dict(state["sampler"])
 
         # with no step count the schedule runs on the clock: its decay ends with the budget
         auto_steps = o["steps"] is None
@@ -399,7 +409,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         def write_checkpoint(rng_state=None):
             if checkpoint is not None:
                 _save_checkpoint(checkpoint, net, opt, rng_state or rng.bit_generator.state,
-                                 step, history, time.perf_counter() - t0, key, target, metadata)
+                                 step, history, time.perf_counter() - t0, key, target, metadata,
+                                 sampler)
                 saves.saved(step)
 
         updating = False        # True while a step's parameters and moments are half-updated
@@ -408,17 +419,26 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
             with signals:
                 while step < total:
                     rng_at_step = rng.bit_generator.state
-                    p, q, nt = target.sample(o["batch"], rng)
+                    if sampler is None:
+                        p, q, nt = target.sample(o["batch"], rng)
+                        wc = errors = None
+                    else:       # drawn where the error is, weighted back to the same loss
+                        p, q, nt, wts = sampler.sample(o["batch"], rng)
+                        wc, errors = wts.astype(t_dtype), np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
                     parts = {"position": 0.0, "normal": 0.0}
 
                     def loss_fn(y, JD, sl):
-                        val, dy, dJD, pr = position_normal_loss(y, JD, qc[sl], ntc[sl], len(p),
-                                                                w, tangent_weight=tw)
+                        val, dy, dJD, pr = position_normal_loss(
+                            y, JD, qc[sl], ntc[sl], len(p), w, tangent_weight=tw,
+                            sample_weight=None if wc is None else wc[sl],
+                            pointwise=errors is not None)
                         parts["position"] += pr["position"]
                         parts["normal"] += pr["normal"]
+                        if errors is not None:
+                            errors[sl] = pr["pointwise"]
                         return val, dy, dJD
 
                     loss, grad = net.value_and_grad(
@@ -436,6 +456,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     lr_now = opt.lr()
                     updating = True
                     opt.step(net.theta, grad)
+                    if sampler is not None:
+                        sampler.observe(errors)
                     step += 1
                     if o["readout_every"] and step % o["readout_every"] == 0:
                         if o["readout"] == "gn":

@@ -28,7 +28,7 @@ __all__ = ["normals_from_tangents", "position_normal_loss"]
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
-                         tangent_weight=1.0):
+                         tangent_weight=1.0, sample_weight=None, pointwise=False):
     """Position + normal loss on one chunk and its cotangents.
 
     Parameters
@@ -41,13 +41,20 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     normal_weight : float, lambda
     scale : float, the surface is ``scale * y`` (an output transform); positions are compared
         after it, normals are scale-invariant
+    tangent_weight : float, weight of the tangential part of the position error
+    sample_weight : (c,) float array, optional
+        Per-point weights of the sum (importance weights of a non-uniform draw: with weights
+        ``density_uniform / density_drawn`` the expected loss is the uniform one).
+    pointwise : bool
+        Also return each point's unweighted error ``|r|^2 + lambda |n - n_i|^2`` as
+        ``parts["pointwise"]`` (what an error-weighted sampler observes).
 
     Returns
     -------
     loss : float (this chunk's contribution)
     dy : (c, 3) float array
     dJD : (c, 3, 2) float array or None
-    parts : dict with the chunk's summed squared position and normal errors
+    parts : dict with the chunk's summed (weighted) squared position and normal errors
 
     Examples
     --------
@@ -61,26 +68,40 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     0.25
     """
     r = scale * y - q
-    sq_pos = float(np.einsum("ij,ij->", r, r))
     if tangent_weight != 1.0:
         # |r|^2 -> (r . n_t)^2 + t |r - (r . n_t) n_t|^2: the tangential part of the error
         # moves points along the surface, not off it
         rn = np.einsum("ij,ij->i", r, normals)[:, None] * normals
         rw = rn + tangent_weight * (r - rn)
-        loss = float(np.einsum("ij,ij->", r, rw)) / n_total
-        dy = (2.0 * scale / n_total) * rw
     else:
-        dy = (2.0 * scale / n_total) * r
-        loss = sq_pos / n_total
-    parts = {"position": sq_pos, "normal": 0.0}
+        rw = r
+    per_pos = np.einsum("ij,ij->i", r, r)
+    per_loss = per_pos if rw is r else np.einsum("ij,ij->i", r, rw)
+    if sample_weight is not None:
+        sample_weight = np.asarray(sample_weight, dtype=r.dtype)
+        rw = sample_weight[:, None] * rw
+
+    def total(v):                       # the chunk's (weighted) sum of per-point values
+        return float(v.sum() if sample_weight is None else sample_weight @ v)
+
+    loss = total(per_loss) / n_total
+    dy = (2.0 * scale / n_total) * rw
+    parts = {"position": total(per_pos), "normal": 0.0}
     if not normal_weight:
+        if pointwise:
+            parts["pointwise"] = per_loss
         return loss, dy, None, parts
     Su, Sv = JD[:, :, 0], JD[:, :, 1]
     n, norm = normals_from_tangents(Su, Sv, degenerate="zero")
     dn = n - normals
-    sq_nrm = float(np.einsum("ij,ij->", dn, dn))
+    per_nrm = np.einsum("ij,ij->i", dn, dn)
+    sq_nrm = total(per_nrm)
     loss += normal_weight * sq_nrm / n_total
     parts["normal"] = sq_nrm
+    if pointwise:
+        parts["pointwise"] = per_loss + normal_weight * per_nrm
+    if sample_weight is not None:
+        dn = sample_weight[:, None] * dn
     gn = (2.0 * normal_weight / n_total) * dn
     g = (gn - np.einsum("ij,ij->i", n, gn)[:, None] * n) / np.maximum(
         norm, np.finfo(norm.dtype).tiny)[:, None]

@@ -1,0 +1,149 @@
+"""Sampling weighted by the error: the weighted loss and its cotangents, the sampler's draw
+and weights (the same objective as the uniform draw), and the fit that uses it."""
+
+import numpy as np
+import pytest
+
+from sns_np.errors import ModelFileError
+from sns_np.options import AUTO
+from sns_np.shapes import Bobble, Ellipsoid
+from sns_np.surface import fit_mesh, fit_shape, position_normal_loss
+from sns_np.surface._adaptive import ErrorSampler, face_cells
+from sns_np.surface._targets import _MeshTarget
+
+TINY = dict(width=12, depth=1, batch=256, n_eval=500, progress=False, lr=1e-3,
+            input_scale=4.0)
+
+
+@pytest.fixture(scope="module")
+def target():
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    return _MeshTarget(V, F, verbose=False)
+
+
+def test_weighted_loss_cotangents_by_differences():
+    g = np.random.default_rng(3)
+    y, JD = g.standard_normal((7, 3)), g.standard_normal((7, 3, 2))
+    q, nt = g.standard_normal((7, 3)), g.standard_normal((7, 3))
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+    w = g.uniform(0.2, 3.0, 7)
+    for tw in (1.0, 0.3):
+        def f(y_, JD_):
+            return position_normal_loss(y_, JD_, q, nt, 7, 0.4, tangent_weight=tw,
+                                        sample_weight=w)[0]
+
+        val, dy, dJD, parts = position_normal_loss(y, JD, q, nt, 7, 0.4, tangent_weight=tw,
+                                                   sample_weight=w, pointwise=True)
+        # the weighted loss is the weighted mean of the unweighted per-point errors
+        assert np.isclose(val, (w * parts["pointwise"]).sum() / 7)
+        plain = position_normal_loss(y, JD, q, nt, 7, 0.4, tangent_weight=tw)[0]
+        assert np.isclose(plain, parts["pointwise"].sum() / 7)
+        h = 1e-6
+        for idx in np.ndindex(*y.shape):
+            e = np.zeros_like(y)
+            e[idx] = h
+            assert np.isclose((f(y + e, JD) - f(y - e, JD)) / (2 * h), dy[idx], atol=1e-8)
+        for idx in np.ndindex(*JD.shape):
+            e = np.zeros_like(JD)
+            e[idx] = h
+            assert np.isclose((f(y, JD + e) - f(y, JD - e)) / (2 * h), dJD[idx], atol=1e-8)
+
+
+def test_unit_weights_are_the_plain_loss():
+    g = np.random.default_rng(4)
+    y, JD = g.standard_normal((5, 3)), g.standard_normal((5, 3, 2))
+    q, nt = g.standard_normal((5, 3)), np.tile([0.0, 0.0, 1.0], (5, 1))
+    a = position_normal_loss(y, JD, q, nt, 5, 0.2)
+    b = position_normal_loss(y, JD, q, nt, 5, 0.2, sample_weight=np.ones(5))
+    assert np.isclose(a[0], b[0]) and np.allclose(a[1], b[1]) and np.allclose(a[2], b[2])
+
+
+def test_face_cells_cover_every_face_with_compact_patches():
+    from sns_np.mesh import face_areas, icosphere
+    V, F = icosphere(4)
+    c = V[F].mean(axis=1)
+    labels = face_cells(c, face_areas(V, F), 200, seed=1)
+    assert labels.shape == (len(F),) and set(np.unique(labels)) == set(range(200))
+    # patches of neighbouring faces: small next to the sphere
+    spread = max(np.linalg.norm(c[labels == k] - c[labels == k].mean(0), axis=1).max()
+                 for k in range(200))
+    assert spread < 0.35
+    assert np.array_equal(face_cells(c, face_areas(V, F), len(F) + 1), np.arange(len(F)))
+
+
+def test_sampler_follows_the_error_and_keeps_the_objective(target):
+    s = ErrorSampler(target, batch=64)          # few cells: 64 / 0.01 / 8 = 800 of 320 faces
+    assert s.n_cells == len(target.face_area)
+    g = np.random.default_rng(0)
+    hot = target.face_centroid[:, 2] > 0.5      # pretend the error is all at the top
+    for _ in range(40):
+        p, q, n, w = s.sample(256, g)
+        face = s.labels[s._cells]
+        s.observe(np.where(hot[face], 1.0, 1e-4))
+    frac_area = target.face_area[hot].sum() / target.face_area.sum()
+    frac_prob = s.prob[s.labels[hot]].sum()
+    assert frac_prob > 2 * frac_area            # drawn where the error is
+    assert np.all(s.weight < 1.0 / (1.0 - s.mix) + 1e-12)
+    # the weighted mean of any function is the area mean: the same objective
+    p, q, n, w = s.sample(200_000, g)
+    s.observe(np.zeros(len(p)))
+    for fval in (lambda x: x[:, 2] ** 2, lambda x: np.exp(x[:, 0])):
+        area_mean = fval(target.sample(400_000, np.random.default_rng(1))[1]).mean()
+        assert abs((w * fval(q)).mean() - area_mean) < 0.01 * abs(area_mean) + 2e-3
+        assert abs(fval(q).mean() - area_mean) > 3 * abs((w * fval(q)).mean() - area_mean)
+    assert abs(w.mean() - 1.0) < 0.01
+    # each point lies in the face the sampler says: the sphere point maps back to it
+    assert np.allclose(target.evaluate_at(p[:100])[0], q[:100], atol=1e-9)
+
+
+def test_sampler_state_round_trip_draws_the_same(target):
+    a, b = ErrorSampler(target, batch=64), ErrorSampler(target, batch=64)
+    g = np.random.default_rng(5)
+    for _ in range(13):
+        p, *_ = a.sample(128, g)
+        a.observe(np.abs(p[:, 0]))
+    b.load_state_dict(a.state_dict())
+    ga, gb = np.random.default_rng(9), np.random.default_rng(9)
+    assert all(np.array_equal(x, y) for x, y in zip(a.sample(50, ga), b.sample(50, gb)))
+    with pytest.raises(ValueError, match="one error per sample"):
+        a.observe(np.ones(3))
+    bad = dict(a.state_dict(), prob=np.ones(4))
+    with pytest.raises(ValueError, match="cells"):
+        b.load_state_dict(bad)
+
+
+@pytest.mark.slow_nojit
+def test_fit_with_error_sampling_resumes_exactly(tmp_path):
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    opts = dict(steps=30, dtype="float64", sampling="error", **TINY)
+    S_full, r_full = fit_mesh(V, F, **opts)
+    assert r_full.options["sampling"] == "error" and np.isfinite(r_full.normal_mean_deg)
+    ck = tmp_path / "ck.npz"
+
+    def interrupt(step, info):
+        if step == 20:                   # between two updates of the probabilities
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        fit_mesh(V, F, checkpoint=ck, callback=interrupt, history_every=5, **opts)
+    S_res, r = fit_mesh(V, F, checkpoint=ck, resume=True, **opts)
+    assert r.steps == 30 and np.array_equal(S_res.net.pack(), S_full.net.pack())
+    # a checkpoint drawn by area is not continued by an error-weighted fit
+    with pytest.raises(ModelFileError, match="different fit"):
+        fit_mesh(V, F, checkpoint=ck, resume=True, **dict(opts, sampling="area"))
+
+
+def test_sampling_choice_and_refusals():
+    V, F = Bobble().mesh(2)
+    opts = dict(TINY, steps=2)
+    _, r = fit_mesh(V, F, **opts)               # a detailed mesh: the detailed end's draw
+    assert r.options["sampling"] == AUTO["detailed"]["sampling"]
+    assert r.choices["sampling"]["why"].startswith("detailed")
+    _, r = fit_mesh(*Ellipsoid(1.0, 1.3, 0.7).mesh(2), **opts)
+    assert r.options["sampling"] == "area"      # smooth: uniform
+    _, r = fit_shape(Bobble(), **opts)          # an analytic map draws its own points
+    assert r.options["sampling"] == "area" and "analytic" in r.choices["sampling"]["why"]
+    with pytest.raises(ValueError, match="needs a mesh target"):
+        fit_shape(Bobble(), sampling="error", **opts)
+    with pytest.raises(ValueError, match="sampling"):
+        fit_mesh(V, F, sampling="stratified", **opts)
