@@ -206,7 +206,7 @@ AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
                "batch": 2048, "sampling": "area"},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512, "sampling": "area"},
+                 "batch": 512, "sampling": "error"},
 }
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
