@@ -36,7 +36,7 @@ class _MeshTarget:
         self.face_area = areas
         self.face_centroid = V[F].mean(axis=1)
         self.area = float(areas.sum())
-        self.center = (areas[:, None] * V[F].mean(axis=1)).sum(axis=0) / self.area
+        self.center = (areas[:, None] * self.face_centroid).sum(axis=0) / self.area
         self.scale = float(np.sqrt(self.area / (4 * np.pi)))
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
