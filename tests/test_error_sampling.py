@@ -103,6 +103,9 @@ def test_sampler_state_round_trip_draws_the_same(target):
     assert all(np.array_equal(x, y) for x, y in zip(a.sample(50, ga), b.sample(50, gb)))
     with pytest.raises(ValueError, match="one error per sample"):
         a.observe(np.ones(3))
+    for kw, name in ((dict(mix=1.0), "mix"), (dict(decay=1.0), "decay"), (dict(every=0), "every")):
+        with pytest.raises(ValueError, match=name):
+            ErrorSampler(target, batch=64, **kw)
     bad = dict(a.state_dict(), prob=np.ones(4))
     with pytest.raises(ValueError, match="cells"):
         b.load_state_dict(bad)

@@ -92,6 +92,10 @@ class ErrorSampler:
                  decay=ERROR_SAMPLING["decay"], every=ERROR_SAMPLING["every"]):
         if not 0.0 <= mix < 1.0:
             raise ValueError(f"mix must be in [0, 1), got {mix}")
+        if not 0.0 < decay < 1.0:
+            raise ValueError(f"decay must be in (0, 1), got {decay}")
+        if int(every) < 1:
+            raise ValueError(f"every must be an integer >= 1, got {every}")
         self.target = target
         self.mix, self.decay, self.every = float(mix), float(decay), int(every)
         areas = np.asarray(target.face_area, dtype=np.float64)
