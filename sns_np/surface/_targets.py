@@ -49,13 +49,15 @@ class _MeshTarget:
         return (q - self.center) / self.scale, nrm
 
     def sample(self, n, rng):
-        face, beta = self.corr.sample_barycentric(n, rng)
-        return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
+        return self._points(*self.corr.sample_barycentric(n, rng))
 
     def sample_faces(self, face, rng):
         """Points uniform by area within the given faces ``(n,)``: ``(p, q, normals)``."""
         from ..mesh import uniform_barycentric
-        beta = uniform_barycentric(len(face), rng)
+        return self._points(face, uniform_barycentric(len(face), rng))
+
+    def _points(self, face, beta):
+        """``(p, q, normals)`` of the points ``beta`` of faces ``face``."""
         return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
 
     def evaluate_at(self, p):
