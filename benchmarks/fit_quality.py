@@ -8,6 +8,7 @@ Run::
     python benchmarks/fit_quality.py dtype --steps 150       # float32 vs float64 training
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
     python benchmarks/fit_quality.py detail                  # the detail measure of each case
+    python benchmarks/fit_quality.py loop spot max           # a Loop surface on the same measures
 
 Cases:
 
@@ -31,6 +32,10 @@ Cases:
   baseline). For ``fit_shape`` the same errors are also printed at the same sphere point
   (``same_*``; its parametrisation is the shape's own), the kinder measure: it does not see a
   surface shifted along itself.
+
+``loop``: no fit; the mesh's Loop subdivision surface (two levels, libigl) on the same
+measures (``dist``, ``nrm``): what a classical smooth surface near the mesh reaches against
+the mesh's own interpolated normals, the reference for the normal goal.
 
 Nothing is asserted; timings on a shared machine are noisy, so compare them within one run.
 """
@@ -93,32 +98,62 @@ def _project(S, x, p, iters=4):
     return p
 
 
-def mesh_fidelity(S, V, F, n=20000, n_dense=100_000):
-    """Two-sided mean distance (relative to the bbox diagonal) and normal angle at the
-    closest mesh point; None without libigl."""
-    try:
-        import igl
-    except ImportError:
-        return None
-    from scipy.spatial import cKDTree
-    V = np.asarray(V, np.float64)
+def _against_mesh(X, n, V, F):
+    """Distances of points X to the mesh and the angles (degrees) between the normals n and
+    the mesh's interpolated (angle-weighted) vertex normal at the closest mesh point."""
+    import igl
     F64 = np.asarray(F, np.int64)
-    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     N = vertex_normals(V, F, weighting="angle")
-    dq = differential_quantities(S, uniform_sphere(n, rng=5))
-    d2, face, C = igl.point_mesh_squared_distance(dq.x, V, F64)
+    d2, face, C = igl.point_mesh_squared_distance(X, V, F64)
     T = V[F64[face]]
     beta = igl.barycentric_coordinates(C, T[:, 0].copy(), T[:, 1].copy(), T[:, 2].copy())
     nm = np.einsum("kc,kci->ki", beta, N[F64[face]])
     nm /= np.linalg.norm(nm, axis=1, keepdims=True)
-    ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", nm, dq.n), -1, 1)))
+    return np.sqrt(d2), np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", nm, n), -1, 1)))
+
+
+def mesh_fidelity(S, V, F, n=20000, n_dense=100_000):
+    """Two-sided mean distance (relative to the bbox diagonal) and normal angle at the
+    closest mesh point; None without libigl."""
+    try:
+        import igl  # noqa: F401
+    except ImportError:
+        return None
+    from scipy.spatial import cKDTree
+    V = np.asarray(V, np.float64)
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    dq = differential_quantities(S, uniform_sphere(n, rng=5))
+    d, ang = _against_mesh(dq.x, dq.n, V, F)
     pd = uniform_sphere(n_dense, rng=6)
     _, k = cKDTree(S(pd)).query(V)
     d_back = np.linalg.norm(S(_project(S, V, pd[k])) - V, axis=1)
-    return {"surface_to_mesh": float(np.sqrt(d2).mean() / diag),
+    return {"surface_to_mesh": float(d.mean() / diag),
             "mesh_to_surface": float(d_back.mean() / diag),
-            "dist": float((np.sqrt(d2).mean() + d_back.mean()) / (2 * diag)),
+            "dist": float((d.mean() + d_back.mean()) / (2 * diag)),
             "nrm": float(ang.mean()), "nrm_median": float(np.median(ang))}
+
+
+def loop_reference(V, F, levels=2, n=20000):
+    """The same measures for the mesh's Loop subdivision surface (``levels`` rounds, libigl):
+    what a classical smooth surface near the mesh reaches against its interpolated normals."""
+    import igl
+    V = np.asarray(V, np.float64)
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    V2, F2 = igl.loop(V, np.asarray(F, np.int64), levels)
+    g = np.random.default_rng(5)
+    a = igl.doublearea(V2, F2)
+    f = g.choice(len(F2), n, p=a / a.sum())
+    u = g.random((n, 2))
+    u[u.sum(axis=1) > 1] = 1 - u[u.sum(axis=1) > 1]
+    b = np.c_[1 - u.sum(axis=1), u]
+    N2 = vertex_normals(V2, F2, weighting="angle")
+    X = np.einsum("kc,kci->ki", b, V2[F2[f]])
+    nx = np.einsum("kc,kci->ki", b, N2[F2[f]])
+    nx /= np.linalg.norm(nx, axis=1, keepdims=True)
+    d, ang = _against_mesh(X, nx, V, F)
+    d_back = np.sqrt(igl.point_mesh_squared_distance(V, V2, F2)[0])
+    return {"dist": float((d.mean() + d_back.mean()) / (2 * diag)), "nrm": float(ang.mean()),
+            "nrm_median": float(np.median(ang))}
 
 
 def analytic_errors(S, shape, n=20000, at="closest"):
@@ -259,6 +294,16 @@ def comparison_case(args):
               f"H error {100 * e['H']:.2f}%, position RMS {rep.position_rms:.2e}")
 
 
+def loop_case(args):
+    """What a Loop subdivision surface of each mesh case reaches on the same measures."""
+    names = [c for c in args.cases[1:] if c in MESHES] or list(MESHES)
+    for case in names:
+        V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
+        r = loop_reference(V, F)
+        print(f"{case}: Loop subdivision (2 levels): dist {r['dist']:.2e}, nrm "
+              f"{r['nrm']:.2f} deg (median {r['nrm_median']:.2f})", flush=True)
+
+
 def detail_case(args):
     """The detail measure that chooses the fitting defaults, for every case."""
     from sns_np.surface.fit import _MeshTarget, _ShapeTarget, detail
@@ -280,7 +325,8 @@ def detail_case(args):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("cases", nargs="*", default=list(ALL),
-                    help=f"cases among {', '.join(ALL)}, or dtype / init (default: all)")
+                    help=f"cases among {', '.join(ALL)}, or dtype / init / detail, or loop "
+                         f"followed by mesh cases (default: all)")
     for name, typ in (("width", int), ("depth", int), ("steps", int), ("batch", int),
                       ("lr", float), ("time-budget", float), ("input-scale", float),
                       ("normal-weight", float)):
@@ -297,6 +343,9 @@ def main(argv=None):
         return
     if args.cases and args.cases[0] == "detail":
         detail_case(args)
+        return
+    if args.cases and args.cases[0] == "loop":
+        loop_case(args)
         return
     bad = [c for c in args.cases if c not in ALL]
     if bad:
