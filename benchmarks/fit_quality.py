@@ -52,7 +52,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
-from sns_np.mesh import check, load, spherical_embedding  # noqa: E402
+from sns_np.mesh import check, load, sample_surface, spherical_embedding  # noqa: E402
 from sns_np.mesh.operators import vertex_normals  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
 from sns_np.sampling import uniform_sphere  # noqa: E402
@@ -140,12 +140,7 @@ def loop_reference(V, F, levels=2, n=20000):
     V = np.asarray(V, np.float64)
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     V2, F2 = igl.loop(V, np.asarray(F, np.int64), levels)
-    g = np.random.default_rng(5)
-    a = igl.doublearea(V2, F2)
-    f = g.choice(len(F2), n, p=a / a.sum())
-    u = g.random((n, 2))
-    u[u.sum(axis=1) > 1] = 1 - u[u.sum(axis=1) > 1]
-    b = np.c_[1 - u.sum(axis=1), u]
+    f, b = sample_surface(V2, F2, n, rng=5)
     N2 = vertex_normals(V2, F2, weighting="angle")
     X = np.einsum("kc,kci->ki", b, V2[F2[f]])
     nx = np.einsum("kc,kci->ki", b, N2[F2[f]])
