@@ -79,7 +79,7 @@ POLE = 0.15
 
 def fit_options(args):
     keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "input_scale",
-            "normal_weight", "smooth", "sampling")
+            "normal_weight", "smooth", "sampling", "optimizer")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -329,6 +329,7 @@ def main(argv=None):
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])
     ap.add_argument("--sampling", choices=["area", "error"])
+    ap.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd", "soap"])
     ap.add_argument("--out", help="folder for the fitted models")
     ap.add_argument("--shared", default=SHARED, help="folder of the shared meshes")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -12,6 +12,7 @@ from sns_np.nn import (
     Adam,
     ResidualMLP,
     RMSProp,
+    SOAP,
     Schedule,
     cosine,
     make_optimizer,
@@ -181,3 +182,128 @@ def test_scipy_lbfgs_fits_a_small_network():
                                   options=dict(maxiter=300))
     assert res.fun < 1e-3 * f0
     assert np.isclose(res.fun, fun(res.x)[0])
+
+
+# ------------------------------------------------------------------------------ SOAP
+
+def _matrix_problem(seed=3, p=6, q=5, well_conditioned=False):
+    """min_W 0.5 |P W Q - C|^2 over a p x q matrix, plus two free numbers (Adam's part)."""
+    g = np.random.default_rng(seed)
+    if well_conditioned:
+        P = np.eye(p) + 0.2 * g.standard_normal((p, p))
+        Q = np.eye(q) + 0.2 * g.standard_normal((q, q))
+    else:
+        P = g.standard_normal((p, p)) * np.logspace(0, 1, p)
+        Q = g.standard_normal((q, q))
+    C = g.standard_normal((p, q))
+
+    def grad(theta):
+        W = theta[: p * q].reshape(p, q)
+        GW = P.T @ (P @ W @ Q - C) @ Q.T
+        return np.concatenate([GW.ravel(), 2 * (theta[p * q:] - 1.0)])
+
+    return grad, [(slice(0, p * q), (p, q))], g.standard_normal(p * q + 2)
+
+
+def test_soap_first_step_is_the_polar_factor_of_the_gradient():
+    """After one gradient, Q_L and Q_R are its singular vectors: G~ is diagonal, and Adam's
+    first step (lr sign) becomes lr U V^T, the orthogonal polar factor of G = U S V^T. (For a
+    gradient whose singular values span many decades, the rounding noise off the diagonal of
+    G~ rises above eps and Adam's scaling lifts it: the identity holds for a well-scaled G.)"""
+    g = np.random.default_rng(5).standard_normal(32)
+    G = g[:30].reshape(6, 5)
+    U, _, Vt = np.linalg.svd(G, full_matrices=False)
+    theta = np.zeros(32)
+    SOAP(lr=0.1, matrices=[(slice(0, 30), (6, 5))]).step(theta, g)
+    assert np.allclose(-theta[:30].reshape(6, 5), 0.1 * U @ Vt, atol=1e-7)
+    assert np.allclose(-theta[30:], 0.1 * np.sign(g[30:]))          # Adam's first step
+
+
+@pytest.mark.parametrize("kind", ["soap", "adam"])
+def test_soap_is_equivariant_under_rotations_and_adam_is_not(kind):
+    """Write the matrix in rotated coordinates, W = A W' B (A, B orthogonal): SOAP's iterates
+    are the rotated iterates, step for step (through several new bases); Adam's are not.
+    Equal to within 1e-6: the first step's rounding off the diagonal of G~ (1e-12 here) is
+    divided by eps like any coordinate, and stays at that level; Adam is off by 1e-2 and more.
+    (A square, well-conditioned problem: see the note of the test above.)"""
+    grad, blocks, theta = _matrix_problem(p=6, q=6, well_conditioned=True)
+    g = np.random.default_rng(11)
+    A, B = (np.linalg.qr(g.standard_normal((6, 6)))[0] for _ in range(2))
+
+    def rotated_grad(phi):                 # gradient of f(A W' B) in W'
+        th = phi.copy()
+        th[:36] = (A @ phi[:36].reshape(6, 6) @ B).ravel()
+        gr = grad(th)
+        gr[:36] = (A.T @ gr[:36].reshape(6, 6) @ B.T).ravel()
+        return gr
+
+    phi = theta.copy()
+    phi[:36] = (A.T @ theta[:36].reshape(6, 6) @ B.T).ravel()
+    make = (lambda: SOAP(lr=0.02, matrices=blocks, every=4)) if kind == "soap" else \
+        (lambda: Adam(lr=0.02))
+    o1, o2 = make(), make()
+    for _ in range(25):
+        o1.step(theta, grad(theta))
+        o2.step(phi, rotated_grad(phi))
+    gap = np.abs(A @ phi[:36].reshape(6, 6) @ B - theta[:36].reshape(6, 6)).max()
+    assert (gap < 1e-6) if kind == "soap" else (gap > 1e-2)
+
+
+def test_soap_converges_and_its_state_round_trip_continues_identically():
+    grad, blocks, theta = _matrix_problem()
+    opt = SOAP(lr=0.05, matrices=blocks, every=3)
+    f0 = np.abs(grad(theta)).max()
+    for _ in range(7):
+        opt.step(theta, grad(theta))
+    twin = SOAP(lr=0.05, matrices=blocks, every=3).load_state_dict(opt.state_dict())
+    copy = theta.copy()
+    for _ in range(200):                      # across many new bases
+        opt.step(theta, grad(theta))
+        twin.step(copy, grad(copy))
+    assert np.array_equal(theta, copy) and twin.t == opt.t == 207
+    assert np.abs(grad(theta)).max() < 1e-3 * f0
+    with pytest.raises(ValueError, match="lacks"):
+        SOAP(lr=0.05, matrices=blocks * 2).load_state_dict(opt.state_dict())
+    with pytest.raises(ValueError, match="'Adam'"):
+        SOAP(lr=0.05, matrices=blocks).load_state_dict(Adam().state_dict())
+
+
+def test_soap_trains_a_network_through_make_optimizer():
+    net = ResidualMLP(width=16, depth=2, seed=0)
+    x = np.random.default_rng(1).standard_normal((128, 3))
+    target = np.sin(2 * x)
+
+    def loss(y, JD, sl):
+        r = y - target[sl]
+        return (r ** 2).sum() / len(x), 2 * r / len(x), None
+
+    ps = net.param_slices()
+    opt = make_optimizer("soap", 1e-2, matrices=[ps["W1"], ps["W2"]])
+    first = net.value_and_grad(x, loss, order=0)[0]
+    for _ in range(150):
+        opt.step(net.theta, net.value_and_grad(x, loss, order=0)[1])
+    assert net.value_and_grad(x, loss, order=0)[0] < 0.05 * first
+
+
+@pytest.mark.parametrize("blocks, match", [
+    ([(slice(0, 30), (6,))], r"shape must be \(m, n\)"),
+    ([(slice(0, 31), (6, 5))], "holds 31 numbers"),
+    ([(slice(None, 30), (6, 5))], "slice with a start"),
+    ([(slice(0, 30, 2), (6, 5))], "slice with a start"),
+    ([30], r"must be \(slice, shape\)"),
+])
+def test_soap_bad_blocks_are_named(blocks, match):
+    with pytest.raises(ValueError, match=match):
+        SOAP(matrices=blocks)
+
+
+def test_soap_blocks_outside_theta_or_overlapping():
+    with pytest.raises(ShapeError, match="inside theta of length 20"):
+        SOAP(matrices=[(slice(0, 30), (6, 5))]).step(np.zeros(20), np.ones(20))
+    both = [(slice(0, 30), (6, 5)), (slice(20, 50), (5, 6))]
+    with pytest.raises(ShapeError, match="overlap"):
+        SOAP(matrices=both).step(np.zeros(60), np.ones(60))
+    opt = SOAP(matrices=[(slice(0, 30), (6, 5))])
+    opt.step(np.zeros(40), np.ones(40))
+    with pytest.raises(ShapeError, match="new optimiser"):
+        opt.step(np.zeros(41), np.ones(41))

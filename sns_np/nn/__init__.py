@@ -3,7 +3,7 @@
 ResidualMLP     the network: forward jets (value, J, D2, directional), reverse-mode gradients,
                 the least-squares fit of its read-out layer
 
-Adam, RMSProp, SGD, Schedule    optimisers and learning-rate schedules on flat vectors
+Adam, RMSProp, SGD, SOAP, Schedule    optimisers and learning-rate schedules on flat vectors
 scipy_objective                 ``fun(theta) -> (loss, grad)`` for scipy.optimize.minimize
 """
 
@@ -14,6 +14,7 @@ from .optim import (
                     Adam,
                     Optimizer,
                     RMSProp,
+                    SOAP,
                     Schedule,
                     constant,
                     cosine,
@@ -23,4 +24,4 @@ from .optim import (
 )
 
 __all__ = ["ResidualMLP", "n_streams", "softplus", "sigmoid", "Optimizer", "Adam", "RMSProp",
-           "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer", "scipy_objective"]
+           "SOAP", "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer", "scipy_objective"]

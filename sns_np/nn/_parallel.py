@@ -182,6 +182,26 @@ def run(work, n_workers: int, queue: TaskQueue | None = None):
         return results
 
 
+def for_each(fn, n: int) -> None:
+    """Call ``fn(i)`` for i in range(n), spread over the workers as whole tasks (each worker
+    with single-threaded BLAS, as in a jet), or one after the other in this thread when there
+    is no parallel plan. Used for independent work on many small matrices (the optimiser
+    SOAP), whose threaded products would leave OpenBLAS's threads spinning into the next jet.
+    """
+    p = plan(n, 1)
+    if p is None or p[0] <= 1:
+        for i in range(n):
+            fn(i)
+        return
+    queue = TaskQueue(n)
+
+    def work(_):
+        for i in queue:
+            fn(i)
+
+    run(work, p[0], queue)
+
+
 class TaskQueue:
     """Hands out 0, 1, ..., n - 1 to whichever worker asks next (thread-safe)."""
 

@@ -380,7 +380,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                 net = net.astype(t_dtype)
             start, history, elapsed0 = 0, {k: [] for k in ("step", "loss", "position_rms",
                                                           "normal_deg", "lr", "seconds")}, 0.0
-        opt = make_optimizer(o["optimizer"], _schedule(o))
+        opt = make_optimizer(o["optimizer"], _schedule(o), **_optimizer_options(o, net))
         if state is not None:
             opt.load_state_dict(state["opt"])
         sampler = ErrorSampler(target, o["batch"]) if o["sampling"] == "error" else None
@@ -545,6 +545,14 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 #: the keyword arguments of fit_sampler that fit_mesh and fit_shape pass through
 _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resume", "progress",
            "callback", "history_every", "source")
+
+
+def _optimizer_options(o, net):
+    """SOAP preconditions the hidden matrices (W1, W2); the other optimisers take no more."""
+    if o["optimizer"] != "soap":
+        return {}
+    ps = net.param_slices()
+    return {"matrices": [ps["W1"], ps["W2"]]}
 
 
 def _check_early(options):
