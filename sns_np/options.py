@@ -277,7 +277,8 @@ class FitOptions(Options):
                               resume=True)
     lr_min: float = option(1e-5, "final learning rate of the cosine schedule",
                            Real(allow_zero=True), resume=True)
-    optimizer: str = option("adam", "optimiser", Choice("adam", "rmsprop", "sgd", "soap"), resume=True)
+    optimizer: str = option("adam", "optimiser", Choice("adam", "rmsprop", "sgd", "soap"),
+                            resume=True)
     schedule: str = option("cosine", "learning-rate schedule", Choice("constant", "cosine"),
                            resume=True)
     warmup: int | None = option(None, f"steps of linear learning-rate warm-up "

@@ -9,10 +9,10 @@ import scipy.optimize
 from sns_np.errors import DivergenceError, ShapeError
 from sns_np.nn import (
     SGD,
+    SOAP,
     Adam,
     ResidualMLP,
     RMSProp,
-    SOAP,
     Schedule,
     cosine,
     make_optimizer,

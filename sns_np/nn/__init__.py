@@ -11,10 +11,10 @@ from .activations import sigmoid, softplus
 from .mlp import ResidualMLP, n_streams
 from .optim import (
                     SGD,
+                    SOAP,
                     Adam,
                     Optimizer,
                     RMSProp,
-                    SOAP,
                     Schedule,
                     constant,
                     cosine,
@@ -24,4 +24,5 @@ from .optim import (
 )
 
 __all__ = ["ResidualMLP", "n_streams", "softplus", "sigmoid", "Optimizer", "Adam", "RMSProp",
-           "SOAP", "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer", "scipy_objective"]
+           "SOAP", "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer",
+           "scipy_objective"]

@@ -544,7 +544,8 @@ def _matrix_blocks(matrices):
             sl, shape = item
             shape = tuple(int(d) for d in shape)
         except (TypeError, ValueError):
-            raise ValueError(f"SOAP: each matrix block must be (slice, shape), got {item!r}")
+            raise ValueError(f"SOAP: each matrix block must be (slice, shape), "
+                             f"got {item!r}") from None
         if len(shape) == 2:
             shape = (1, *shape)
         if len(shape) != 3 or min(shape) < 0:
