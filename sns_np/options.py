@@ -204,9 +204,9 @@ DETAIL_RANGE = (5e-3, 2e-2)
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
-               "batch": 2048, "sampling": "area"},
+               "batch": 2048, "sampling": "area", "optimizer": "adam"},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512, "sampling": "error"},
+                 "batch": 512, "sampling": "error", "optimizer": "soap"},
 }
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
@@ -250,8 +250,8 @@ class FitOptions(Options):
     Examples
     --------
     >>> o = FitOptions(width=32, depth=2, steps=100)
-    >>> o.lr is None, o.to_dict()["optimizer"]           # lr: chosen by the fit
-    (True, 'adam')
+    >>> o.lr is None, o.to_dict()["schedule"]            # lr: chosen by the fit
+    (True, 'cosine')
     >>> FitOptions.from_dict(o.to_dict()) == o           # as kept in a model's metadata
     True
     >>> FitOptions(steps=0)
@@ -277,8 +277,10 @@ class FitOptions(Options):
                               resume=True)
     lr_min: float = option(1e-5, "final learning rate of the cosine schedule",
                            Real(allow_zero=True), resume=True)
-    optimizer: str = option("adam", "optimiser", Choice("adam", "rmsprop", "sgd", "soap"),
-                            resume=True)
+    optimizer: str | None = option(
+        None, f"optimiser; soap: Adam in the eigenbasis of Shampoo's factors for the hidden "
+        f"matrices (default: {_auto('optimizer')})", Choice("adam", "rmsprop", "sgd", "soap"),
+        resume=True)
     schedule: str = option("cosine", "learning-rate schedule", Choice("constant", "cosine"),
                            resume=True)
     warmup: int | None = option(None, f"steps of linear learning-rate warm-up "

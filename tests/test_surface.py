@@ -108,7 +108,8 @@ def test_normal_weight_follows_the_parametrisation():
     # a target of fit_sampler that does not say "exact" is parametrised like a mesh
     from sns_np.options import FitOptions
     from sns_np.surface._plan import _plan
-    o = FitOptions(steps=1, batch=8, lr=1e-3, warmup=0, input_scale=4.0).to_dict()
+    o = FitOptions(steps=1, batch=8, lr=1e-3, warmup=0, input_scale=4.0,
+                   optimizer="adam").to_dict()
     unknown = type("Target", (), {"parametrisation": "something else"})()
     _plan(unknown, o, net=None)
     assert o["normal_weight"] == NORMAL_WEIGHT["embedding"]
@@ -223,11 +224,15 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
-    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling"}
+    assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
+    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
+                              "optimizer"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
+    assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
     assert r.options["input_scale"] == AUTO["smooth"]["input_scale"]
     assert r.options["batch"] == AUTO["smooth"]["batch"] == 2048
+    assert r.options["optimizer"] == "adam"
     # a budget too short for the goals says so
     assert any("too short" in n for n in r.notes) and "too short" in r.summary()
 

@@ -34,6 +34,11 @@ class _ClockCosine:
         return float(lr)
 
 
+_OPTIMIZER_WHY = {
+    "adam": ": Adam (a smooth target needs no more)",
+    "soap": ": SOAP, Adam in the eigenbasis of Shampoo's factors for the hidden matrices "
+            "(detail is learnt in fewer steps, docs/fitting.md)"}
+
 _SAMPLING_WHY = {
     "area": ": uniform by area (the error is spread evenly)",
     "error": ": more samples where the recent error is, weighted back to the same loss"}
@@ -100,10 +105,10 @@ def _plan(target, o, net, elapsed=0.0):
                                "analytic map): no mesh faces to weight by their error"}
     if net is not None:
         # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
-        for k in ("lr", "warmup", "batch", "sampling"):
+        for k in ("lr", "warmup", "batch", "sampling", "optimizer"):
             if o[k] is None:
                 o[k] = AUTO["smooth"][k]
-    todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling")
+    todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer")
             if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
@@ -123,7 +128,8 @@ def _plan(target, o, net, elapsed=0.0):
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
-                          + (_SAMPLING_WHY[v] if k == "sampling" else "")}
+                          + (_SAMPLING_WHY[v] if k == "sampling" else "")
+                          + (_OPTIMIZER_WHY[v] if k == "optimizer" else "")}
     if o["normal_weight"] is None:
         # "exact" for an analytic map; anything else is parametrised like a mesh
         kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
