@@ -128,9 +128,10 @@ def test_time_budget_tolerance_and_callback_stop():
 
 
 @pytest.mark.slow_nojit
-def test_checkpoint_resume_is_exact(tmp_path):
+@pytest.mark.parametrize("optimizer", ["adam", "soap"])
+def test_checkpoint_resume_is_exact(tmp_path, optimizer):
     E = Ellipsoid(1.0, 1.3, 0.7)
-    opts = dict(steps=40, dtype="float64", **TINY)
+    opts = dict(steps=40, dtype="float64", optimizer=optimizer, **TINY)
     S_full, _ = fit_shape(E, **opts)
     ck = tmp_path / "ck.npz"
 
