@@ -260,9 +260,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         time, 3.3 times as many steps of a quarter of the samples fit detail better
         (docs/fitting.md). A warm start ``net`` uses the smooth end's.
     lr, lr_min, schedule, warmup, optimizer
-        Adam by default, cosine decay from ``lr`` to ``lr_min`` with a linear warm-up of
-        ``warmup`` steps. ``lr`` and ``warmup`` default to a choice from the target's
-        :func:`detail` (``AUTO``; a warm start ``net`` uses the smooth end's).
+        Cosine decay from ``lr`` to ``lr_min`` with a linear warm-up of ``warmup`` steps.
+        ``lr``, ``warmup`` and ``optimizer`` default to a choice from the target's
+        :func:`detail` (``AUTO``; a warm start ``net`` uses the smooth end's): Adam for a
+        smooth target, SOAP (:class:`~sns_np.nn.SOAP` on the hidden matrices ``W1``, ``W2``,
+        Adam on the rest) for a detailed one, which learns detail in fewer steps.
         ``optimizer="rmsprop", lr=1e-4, schedule="constant", normal_weight=1e-4`` reproduces
         the reference's settings.
     normal_weight : float
