@@ -392,7 +392,7 @@ class SOAP(Optimizer):
     into the new ones exactly; the second moment keeps its index (the eigenvalues are sorted,
     so index i stays the i-th smallest direction), as in the reference.
 
-    Per step it costs six products of each matrix's size (about 34 MFLOP for 256 x 256) and,
+    Per step it costs six products of each matrix's size (each 34 MFLOP for 256 x 256) and,
     every ``every`` steps, two symmetric eigendecompositions; docs/fitting.md measures what
     that buys in a surface fit.
 
