@@ -390,7 +390,7 @@ class SOAP(Optimizer):
     orthogonal change of basis the layer's inputs and outputs are written in (the property
     the tests check), which Adam's is not. When the bases change, the first moment is carried
     into the new ones exactly; the second moment keeps its index (the eigenvalues are sorted,
-    so index i stays the i-th smallest direction), as in the reference.
+    so index i stays the i-th smallest direction), as its authors do.
 
     Per step it costs six products of each matrix's size (each 34 MFLOP for 256 x 256) and,
     every ``every`` steps, two symmetric eigendecompositions; docs/fitting.md measures what
