@@ -266,6 +266,8 @@ def test_soap_converges_and_its_state_round_trip_continues_identically():
         SOAP(lr=0.05, matrices=blocks * 2).load_state_dict(opt.state_dict())
     with pytest.raises(ValueError, match="'Adam'"):
         SOAP(lr=0.05, matrices=blocks).load_state_dict(Adam().state_dict())
+    with pytest.raises(ValueError, match=r"L0 has shape \(1, 6, 6\), expected \(1, 5, 5\)"):
+        SOAP(lr=0.05, matrices=[(slice(0, 30), (5, 6))]).load_state_dict(opt.state_dict())
 
 
 def test_soap_trains_a_network_through_make_optimizer():

@@ -531,6 +531,13 @@ class SOAP(Optimizer):
         missing = [n for n in names if n not in state]
         if missing and int(state["t"]) > 0:
             raise ValueError(f"SOAP state lacks {missing}: it was written for other matrices")
+        for i, (_, k, m, n) in enumerate(self.matrices):
+            for a, shape in (("L", (k, m, m)), ("R", (k, n, n)), ("m", (k, m, n)),
+                             ("v", (k, m, n)), ("QL", (k, m, m)), ("QR", (k, n, n))):
+                got = np.shape(state.get(f"{a}{i}", np.empty(shape)))
+                if got != shape:
+                    raise ValueError(f"SOAP state {a}{i} has shape {got}, expected {shape}: "
+                                     f"it was written for other matrices")
         self.t = int(state["t"])
         self._state = {n: np.array(state[n]) for n in names if n in state}
         return self

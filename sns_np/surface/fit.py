@@ -75,7 +75,7 @@ class FitReport:
     >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
-    ['detail', 'input_scale', 'lr', 'normal_weight', 'sampling', 'warmup']
+    ['detail', 'input_scale', 'lr', 'normal_weight', 'optimizer', 'sampling', 'warmup']
     """
 
     steps: int = 0

@@ -363,10 +363,18 @@ def _check_checkpoint(data, source):
     if "opt.t" in data:
         _npz.int_field(data, "opt.t", source, minimum=0)
     n_theta = _npz.declared(data, "net.theta")[0] if "net.theta" in data else None
+    # SOAP keeps stacks of matrices (their shapes are checked by its load_state_dict); every
+    # other optimiser keeps vectors as long as theta
+    soap = "opt.kind" in data and str(data["opt.kind"]) == "SOAP"
     for k in (data.files if hasattr(data, "files") else list(data)):
         if k.startswith("checkpoint.history.") or (
                 k.startswith("opt.") and k not in ("opt.kind", "opt.t")):
             shape, dt = _npz.declared(data, k)
+            if soap and k.startswith("opt."):
+                if dt.kind not in "fiu" or len(shape) not in (1, 3):
+                    raise ModelFileError(f"{source}: field {k!r} must be a vector or a stack "
+                                         f"of matrices of numbers, got {dt} of shape {shape}")
+                continue
             want = n_theta if k.startswith("opt.") else shape
             if len(shape) != 1 or dt.kind not in "fiu" or shape != want:
                 raise ModelFileError(f"{source}: field {k!r} must be a vector of numbers"
