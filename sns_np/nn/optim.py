@@ -291,6 +291,17 @@ class SGD(Optimizer):
         theta -= lr * (g + self.momentum * buf if self.nesterov else buf)
 
 
+def _adam_direction(g, m, v, b1, b2, c2, eps):
+    """Adam's moments ``m``, ``v`` updated in place with the gradient ``g``; returns the
+    direction ``m / (sqrt(c2 v) + eps)``, ``c2 = 1 / (1 - b2^t)`` (``m``'s own bias correction
+    is left to the caller's rate)."""
+    m *= b1
+    m += (1.0 - b1) * g
+    v *= b2
+    v += (1.0 - b2) * (g * g)
+    return m / (np.sqrt(v * c2) + eps)
+
+
 class Adam(Optimizer):
     """Adam (Kingma & Ba 2015).
 
@@ -328,11 +339,8 @@ class Adam(Optimizer):
             adam_update(theta, g, m, v, lr * mhat_scale, self.b1, self.b2, vhat_scale,
                         self.eps)
             return
-        m *= self.b1
-        m += (1.0 - self.b1) * g
-        v *= self.b2
-        v += (1.0 - self.b2) * (g * g)
-        theta -= (lr * mhat_scale) * m / (np.sqrt(v * vhat_scale) + self.eps)
+        theta -= (lr * mhat_scale) * _adam_direction(g, m, v, self.b1, self.b2, vhat_scale,
+                                                     self.eps)
 
 
 class RMSProp(Optimizer):
@@ -441,7 +449,7 @@ class SOAP(Optimizer):
 
     def _blocks(self, theta):
         """The blocks as (start, k, m, n), checked against ``theta``; and the other indices."""
-        key = ("rest", theta.size)
+        key = theta.size
         if getattr(self, "_key", None) != key:
             taken = np.zeros(theta.size, dtype=bool)
             for start, k, m, n in self.matrices:
@@ -482,12 +490,8 @@ class SOAP(Optimizer):
         t = self.t + 1
         c1 = lr / (1.0 - self.b1 ** t)
         c2 = 1.0 / (1.0 - self.b2 ** t)
-        m, v, gr = st["rest_m"], st["rest_v"], g[rest]
-        m *= self.b1
-        m += (1.0 - self.b1) * gr
-        v *= self.b2
-        v += (1.0 - self.b2) * (gr * gr)
-        theta[rest] -= c1 * m / (np.sqrt(v * c2) + self.eps)
+        theta[rest] -= c1 * _adam_direction(g[rest], st["rest_m"], st["rest_v"], self.b1,
+                                            self.b2, c2, self.eps)
         tasks = []                  # one per matrix: (its block, its index in the stack)
         for i, (start, k, p, q) in enumerate(self.matrices):
             stop = start + k * p * q
@@ -515,12 +519,8 @@ class SOAP(Optimizer):
             QRn = scipy.linalg.eigh(R, driver="evd", check_finite=False)[1].astype(R.dtype)
             M[...] = (QLn.T @ QL) @ M @ (QR.T @ QRn)
             QL[...], QR[...] = QLn, QRn
-        Gr = QL.T @ G @ QR
-        M *= self.b1
-        M += (1.0 - self.b1) * Gr
-        V *= self.b2
-        V += (1.0 - self.b2) * (Gr * Gr)
-        W -= c1 * (QL @ (M / (np.sqrt(V * c2) + self.eps)) @ QR.T)
+        D = _adam_direction(QL.T @ G @ QR, M, V, self.b1, self.b2, c2, self.eps)
+        W -= c1 * (QL @ D @ QR.T)
 
     def load_state_dict(self, state: dict) -> Optimizer:
         kind = str(state.get("kind", ""))
