@@ -413,8 +413,8 @@ class SOAP(Optimizer):
         them). Empty blocks are skipped; blocks may not overlap.
     betas : (b1, b2)
         Adam's moment decays. The second moment's 0.95 (as SOAP's authors use, against Adam's
-        0.999) lets it follow the rotating bases: in a surface fit 0.999 was much worse
-        (docs/fitting.md, "SOAP's constants").
+        0.999) lets it follow the rotating bases: in a surface fit 0.999 was much worse at
+        equal steps and a little worse at the end (docs/fitting.md, "SOAP's constants").
     shampoo_beta : float
         Decay ``bs`` of the factors ``L`` and ``R``.
     eps : float
