@@ -194,7 +194,12 @@ def test_checkpoint_generator_state_is_checked(tmp_path):
             ("step", {"checkpoint.step": np.array([1, 2])}, ["'checkpoint.step'"]),
             ("seconds", {"checkpoint.seconds": np.array(np.inf)}, ["'checkpoint.seconds'"]),
             ("opt_t", {"opt.t": np.array("3")}, ["'opt.t'"]),
-            ("opt_m", {"opt.m": np.zeros(5)}, ["'opt.m'"]),
+            ("opt_m", {"opt.m": np.zeros(5)}, ["'opt.m'", "vector of"]),
+            ("opt_kind", {"opt.kind": np.array("Nadam")}, ["'opt.kind'", "Adam, RMSProp"]),
+            ("soap_flat", {"opt.kind": np.array("SOAP"), "opt.QL0": np.zeros((4, 4))},
+             ["'opt.QL0'", "stack of matrices"]),
+            ("soap_name", {"opt.kind": np.array("SOAP"), "opt.X0": np.zeros((1, 4, 4))},
+             ["'opt.X0'", "not part of SOAP's state"]),
             ("history", {"checkpoint.history.loss": np.zeros((2, 2))},
              ["'checkpoint.history.loss'"])]:
         path = _write_zip(tmp_path / f"{name}.ckpt.npz", dict(base, **changes))

@@ -258,6 +258,41 @@ class Optimizer:
                        if name in state}
         return self
 
+    @classmethod
+    def check_state_layout(cls, layout: dict, n_theta: int, prefix: str = "") -> None:
+        """Refuse state arrays that cannot be this optimiser's, from shapes and dtypes alone.
+
+        A checkpoint loader calls this before it reads any array, with the shapes and
+        dtypes the file declares: each array of Adam, RMSProp and SGD is a vector of
+        ``n_theta`` numbers. :meth:`load_state_dict` checks what it reads again.
+
+        Parameters
+        ----------
+        layout : dict
+            ``{name: (shape, dtype)}`` for the arrays of :meth:`state_dict` other than
+            "kind" and "t".
+        n_theta : int
+        prefix : str
+            Put before each name in the error (a file's field names).
+
+        Raises
+        ------
+        ValueError
+            Naming the first array that does not fit.
+
+        Examples
+        --------
+        >>> Adam.check_state_layout({"m": ((5,), np.dtype(float))}, 5)
+        >>> Adam.check_state_layout({"m": ((5, 1), np.dtype(float))}, 5, prefix="opt.")
+        Traceback (most recent call last):
+            ...
+        ValueError: field 'opt.m' must be a vector of 5 numbers, got float64 of shape (5, 1)
+        """
+        for name, (shape, dtype) in layout.items():
+            if np.dtype(dtype).kind not in "fiu" or tuple(shape) != (n_theta,):
+                raise ValueError(f"field {prefix + name!r} must be a vector of {n_theta} "
+                                 f"numbers, got {dtype} of shape {shape}")
+
 
 class SGD(Optimizer):
     """Gradient descent with optional (Nesterov) momentum.
@@ -475,11 +510,12 @@ class SOAP(Optimizer):
             st["rest_m"] = np.zeros(rest.size, dt)
             st["rest_v"] = np.zeros(rest.size, dt)
             for i, (_, k, m, n) in enumerate(self.matrices):
-                for name, shape in (("L", (k, m, m)), ("R", (k, n, n)), ("m", (k, m, n)),
-                                    ("v", (k, m, n))):
-                    st[f"{name}{i}"] = np.zeros(shape, dt)
-                st[f"QL{i}"] = np.broadcast_to(np.eye(m, dtype=dt), (k, m, m)).copy()
-                st[f"QR{i}"] = np.broadcast_to(np.eye(n, dtype=dt), (k, n, n)).copy()
+                for name, shape in _soap_state_shapes(k, m, n):
+                    if name.startswith("Q"):        # the bases start as the identity
+                        eye = np.eye(shape[1], dtype=dt)
+                        st[f"{name}{i}"] = np.broadcast_to(eye, shape).copy()
+                    else:
+                        st[f"{name}{i}"] = np.zeros(shape, dt)
         elif st["rest_m"].shape != rest.shape or st["rest_m"].dtype != theta.dtype:
             raise ShapeError(f"optimiser state does not match theta of length {theta.size} "
                              f"and dtype {theta.dtype}; use a new optimiser for a new model")
@@ -525,25 +561,60 @@ class SOAP(Optimizer):
         D = _adam_direction(QL.T @ G @ QR, M, V, self.b1, self.b2, c2, self.eps)
         W -= c1 * (QL @ D @ QR.T)
 
+    @classmethod
+    def check_state_layout(cls, layout: dict, n_theta: int, prefix: str = "") -> None:
+        """As :meth:`Optimizer.check_state_layout`, for SOAP's arrays: the moments of the
+        parameters outside the matrices are vectors no longer than theta, every other array
+        is a stack of matrices (which matrices is known only to an instance:
+        :meth:`load_state_dict` checks their shapes).
+
+        Examples
+        --------
+        >>> SOAP.check_state_layout({"rest_m": ((4,), np.dtype(float)),
+        ...                          "QL0": ((2, 8, 8), np.dtype(float))}, 200)
+        >>> SOAP.check_state_layout({"QL0": ((8, 8), np.dtype(float))}, 200)
+        Traceback (most recent call last):
+            ...
+        ValueError: field 'QL0' must be a stack of matrices of numbers, got float64 of shape (8, 8)
+        """
+        for name, (shape, dtype) in layout.items():
+            shape = tuple(shape)
+            if name in ("rest_m", "rest_v"):
+                ok, want = len(shape) == 1 and shape[0] <= n_theta, \
+                    f"a vector of at most {n_theta} numbers"
+            else:
+                stem = name.rstrip("0123456789")
+                if stem not in {a for a, _ in _soap_state_shapes(1, 1, 1)} or stem == name:
+                    raise ValueError(f"field {prefix + name!r} is not part of SOAP's state")
+                ok, want = len(shape) == 3, "a stack of matrices of numbers"
+            if not ok or np.dtype(dtype).kind not in "fiu":
+                raise ValueError(f"field {prefix + name!r} must be {want}, got {dtype} of "
+                                 f"shape {shape}")
+
     def load_state_dict(self, state: dict) -> Optimizer:
         kind = str(state.get("kind", ""))
         if kind != type(self).__name__:
             raise ValueError(f"optimiser state is for {kind!r}, not {type(self).__name__!r}")
-        names = ["rest_m", "rest_v"] + [f"{a}{i}" for i in range(len(self.matrices))
-                                        for a in ("L", "R", "m", "v", "QL", "QR")]
-        missing = [n for n in names if n not in state]
-        if missing and int(state["t"]) > 0:
-            raise ValueError(f"SOAP state lacks {missing}: it was written for other matrices")
+        names = ["rest_m", "rest_v"]
         for i, (_, k, m, n) in enumerate(self.matrices):
-            for a, shape in (("L", (k, m, m)), ("R", (k, n, n)), ("m", (k, m, n)),
-                             ("v", (k, m, n)), ("QL", (k, m, m)), ("QR", (k, n, n))):
+            for a, shape in _soap_state_shapes(k, m, n):
+                names.append(f"{a}{i}")
                 got = np.shape(state.get(f"{a}{i}", np.empty(shape)))
                 if got != shape:
                     raise ValueError(f"SOAP state {a}{i} has shape {got}, expected {shape}: "
                                      f"it was written for other matrices")
+        missing = [n for n in names if n not in state]
+        if missing and int(state["t"]) > 0:
+            raise ValueError(f"SOAP state lacks {missing}: it was written for other matrices")
         self.t = int(state["t"])
         self._state = {n: np.array(state[n]) for n in names if n in state}
         return self
+
+
+def _soap_state_shapes(k, m, n):
+    """SOAP's arrays for ``k`` stacked m x n matrices: (name, shape), in one order."""
+    return (("L", (k, m, m)), ("R", (k, n, n)), ("m", (k, m, n)), ("v", (k, m, n)),
+            ("QL", (k, m, m)), ("QR", (k, n, n)))
 
 
 def _matrix_blocks(matrices):

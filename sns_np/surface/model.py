@@ -21,6 +21,7 @@ from .._npz import load_npz, save_npz
 from .._validation import as_points, check_order
 from ..errors import ModelFileError
 from ..nn.mlp import ResidualMLP
+from ..nn.optim import _OPTIMIZERS
 
 __all__ = ["SphericalNeuralSurface"]
 
@@ -260,9 +261,9 @@ class SphericalNeuralSurface:
         scale = _npz.field(data, "scale", source, kinds="fiu", what="a number")
         metadata = _npz.json_field(data, "metadata", source)
         _check_metadata(metadata, source)
-        if "checkpoint.key" in data:
-            _check_checkpoint(data, source)
         net = ResidualMLP.from_state(data, prefix="net.", source=source)
+        if "checkpoint.key" in data:
+            _check_checkpoint(data, source, net.theta.size)
         try:
             return cls(net, center=np.asarray(center, dtype=np.float64), scale=float(scale),
                        metadata=metadata)
@@ -339,7 +340,7 @@ def _check_metadata(metadata, source):
                                  f"got {type(fit[k]).__name__}")
 
 
-def _check_checkpoint(data, source):
+def _check_checkpoint(data, source, n_theta):
     """The fields that resuming a fit reads, checked before it reads them (a crafted random
     generator state would otherwise surface as a TypeError deep inside NumPy)."""
     _npz.field(data, "checkpoint.key", source, kinds="U", what="text")
@@ -358,28 +359,29 @@ def _check_checkpoint(data, source):
     except Exception as exc:  # TypeError, ValueError, KeyError, OverflowError...
         raise ModelFileError(f"{source}: field 'checkpoint.rng' is not a valid {name} state "
                              f"({type(exc).__name__})") from None
-    if "opt.kind" in data:
-        _npz.field(data, "opt.kind", source, kinds="U", what="text")
+    fields = data.files if hasattr(data, "files") else list(data)
+    for k in fields:
+        if k.startswith("checkpoint.history."):
+            shape, dt = _npz.declared(data, k)
+            if len(shape) != 1 or dt.kind not in "fiu":
+                raise ModelFileError(f"{source}: field {k!r} must be a vector of numbers, "
+                                     f"got {dt} of shape {shape}")
     if "opt.t" in data:
         _npz.int_field(data, "opt.t", source, minimum=0)
-    n_theta = _npz.declared(data, "net.theta")[0] if "net.theta" in data else None
-    # SOAP keeps stacks of matrices (their shapes are checked by its load_state_dict); every
-    # other optimiser keeps vectors as long as theta
-    soap = "opt.kind" in data and str(data["opt.kind"]) == "SOAP"
-    for k in (data.files if hasattr(data, "files") else list(data)):
-        if k.startswith("checkpoint.history.") or (
-                k.startswith("opt.") and k not in ("opt.kind", "opt.t")):
-            shape, dt = _npz.declared(data, k)
-            if soap and k.startswith("opt."):
-                if dt.kind not in "fiu" or len(shape) not in (1, 3):
-                    raise ModelFileError(f"{source}: field {k!r} must be a vector or a stack "
-                                         f"of matrices of numbers, got {dt} of shape {shape}")
-                continue
-            want = n_theta if k.startswith("opt.") else shape
-            if len(shape) != 1 or dt.kind not in "fiu" or shape != want:
-                raise ModelFileError(f"{source}: field {k!r} must be a vector of numbers"
-                                     + (f" of shape {want}" if k.startswith("opt.") else "")
-                                     + f", got {dt} of shape {shape}")
+    layout = {k[4:]: _npz.declared(data, k) for k in fields
+              if k.startswith("opt.") and k not in ("opt.kind", "opt.t")}
+    if layout and "opt.kind" not in data:
+        raise ModelFileError(f"{source}: optimiser state without field 'opt.kind'")
+    if "opt.kind" in data:
+        kind = _npz.field(data, "opt.kind", source, kinds="U", what="text")
+        classes = {cls.__name__: cls for cls in _OPTIMIZERS.values()}
+        if kind not in classes:
+            raise ModelFileError(f"{source}: field 'opt.kind' is {kind[:80]!r}, expected one "
+                                 f"of {', '.join(sorted(classes))}")
+        try:
+            classes[kind].check_state_layout(layout, n_theta, prefix="opt.")
+        except ValueError as exc:
+            raise ModelFileError(f"{source}: {exc}") from None
 
 
 def _json_default(obj):
