@@ -249,6 +249,53 @@ def test_soap_is_equivariant_under_rotations_and_adam_is_not(kind):
     assert (gap < 1e-6) if kind == "soap" else (gap > 1e-2)
 
 
+@pytest.mark.parametrize("clip", [None, 1.0, 0.5])
+def test_soap_clips_the_direction_in_its_eigenbasis(clip):
+    """A gradient whose dominant direction turns every 40 steps: after a change of basis the
+    first moment, carried into the new basis, meets a second moment kept by index, and the
+    direction m^ / sqrt(v^) leaves Adam's steady range [-1, 1] unless clipped. The direction
+    is read back from the step: D = Q_L^T (-dW) Q_R / (lr / (1 - b1^t))."""
+    g = np.random.default_rng(3)
+    p = q = 8
+    U, V = (np.linalg.qr(g.standard_normal((p, p)))[0] for _ in range(2))
+    lr = 1e-3
+    opt = SOAP(lr=lr, matrices=[(slice(0, p * q), (p, q))], every=5, clip=clip)
+    theta = np.zeros(p * q)
+    worst = 0.0
+    for t in range(1, 201):
+        k = ((t - 1) // 40) % p
+        G = 10 * np.outer(U[:, k], V[:, k]) + 1e-3 * g.standard_normal((p, q))
+        before = theta.copy()
+        opt.step(theta, G.ravel())
+        QL, QR = opt._state["QL0"][0], opt._state["QR0"][0]
+        D = QL.T @ (before - theta).reshape(p, q) @ QR * (1 - 0.9 ** t) / lr
+        worst = max(worst, np.abs(D).max())
+    if clip is None:
+        assert worst > 2.0                  # the failure the clip exists for
+    else:
+        assert clip * 0.99 < worst <= clip * (1 + 1e-9)
+
+
+def test_soap_shortens_a_gradient_far_longer_than_its_running_mean():
+    """Twenty gradients of norm 1 (running mean 1), then one of norm 100: SOAP steps as if
+    it had been given that gradient at norm grad_clip = 2; without the guard it does not."""
+    grad, blocks, theta0 = _matrix_problem()
+    g = np.random.default_rng(4)
+    unit = [v / np.linalg.norm(v) for v in g.standard_normal((21, theta0.size))]
+    thetas = []
+    for grad_clip, last in [(2.0, 100 * unit[-1]), (2.0, 2 * unit[-1]), (None, 100 * unit[-1])]:
+        opt, theta = SOAP(lr=0.01, matrices=blocks, every=3, grad_clip=grad_clip), theta0.copy()
+        for v in unit[:-1]:
+            opt.step(theta, v)
+        opt.step(theta, last)
+        thetas.append(theta)
+    assert np.allclose(thetas[0], thetas[1], rtol=0, atol=1e-12)
+    assert np.abs(thetas[2] - thetas[0]).max() > 1e-4
+    state = opt.state_dict()
+    assert "gnorm" not in state and "gnorm" in SOAP(matrices=blocks).load_state_dict(
+        dict(state, gnorm=np.ones(1)))._state
+
+
 def test_soap_converges_and_its_state_round_trip_continues_identically():
     grad, blocks, theta = _matrix_problem()
     opt = SOAP(lr=0.05, matrices=blocks, every=3)
@@ -285,6 +332,17 @@ def test_soap_trains_a_network_through_make_optimizer():
     for _ in range(150):
         opt.step(net.theta, net.value_and_grad(x, loss, order=0)[1])
     assert net.value_and_grad(x, loss, order=0)[0] < 0.05 * first
+
+
+@pytest.mark.parametrize("options, match", [
+    ({"clip": 0.0}, "clip must be finite and > 0"),
+    ({"clip": float("nan")}, "clip must be finite"),
+    ({"every": 0}, "every"),
+    ({"betas": (0.9, 1.0)}, r"betas must lie in \[0, 1\)"),
+])
+def test_soap_bad_constants_are_named(options, match):
+    with pytest.raises(ValueError, match=match):
+        SOAP(**options)
 
 
 @pytest.mark.parametrize("blocks, match", [
