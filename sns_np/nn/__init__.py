@@ -19,10 +19,11 @@ from .optim import (
                     constant,
                     cosine,
                     make_optimizer,
+                    optimizer_class,
                     scipy_objective,
                     step,
 )
 
 __all__ = ["ResidualMLP", "n_streams", "softplus", "sigmoid", "Optimizer", "Adam", "RMSProp",
            "SOAP", "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer",
-           "scipy_objective"]
+           "optimizer_class", "scipy_objective"]

@@ -27,7 +27,7 @@ from .._validation import check_positive_float, check_positive_int
 from ..errors import DivergenceError, ShapeError
 
 __all__ = ["Schedule", "constant", "cosine", "step", "Optimizer", "SGD", "Adam", "RMSProp",
-           "SOAP", "make_optimizer", "scipy_objective"]
+           "SOAP", "optimizer_class", "make_optimizer", "scipy_objective"]
 
 
 # ------------------------------------------------------------------------------ schedules
@@ -694,8 +694,27 @@ def _matrix_blocks(matrices):
 _OPTIMIZERS = {"adam": Adam, "rmsprop": RMSProp, "sgd": SGD, "soap": SOAP}
 
 
+def optimizer_class(name: str) -> type:
+    """The optimiser class called ``name``, in any case: "adam", "rmsprop", "sgd", "soap",
+    or the ``kind`` a :meth:`Optimizer.state_dict` records.
+
+    Examples
+    --------
+    >>> optimizer_class("SOAP").__name__, optimizer_class("rmsprop").__name__
+    ('SOAP', 'RMSProp')
+    >>> optimizer_class("nadam")
+    Traceback (most recent call last):
+        ...
+    ValueError: unknown optimiser 'nadam'; expected one of ['adam', 'rmsprop', 'sgd', 'soap']
+    """
+    key = str(name).lower()
+    if key not in _OPTIMIZERS:
+        raise ValueError(f"unknown optimiser {name!r}; expected one of {sorted(_OPTIMIZERS)}")
+    return _OPTIMIZERS[key]
+
+
 def make_optimizer(name: str, lr, **options) -> Optimizer:
-    """Optimiser by name: "adam", "rmsprop" or "sgd".
+    """Optimiser by name: "adam", "rmsprop", "sgd" or "soap".
 
     Examples
     --------
@@ -705,10 +724,7 @@ def make_optimizer(name: str, lr, **options) -> Optimizer:
     >>> type(make_optimizer("Adam", cosine(1e-3, 100))).__name__
     'Adam'
     """
-    key = str(name).lower()
-    if key not in _OPTIMIZERS:
-        raise ValueError(f"unknown optimiser {name!r}; expected one of {sorted(_OPTIMIZERS)}")
-    return _OPTIMIZERS[key](lr=lr, **options)
+    return optimizer_class(name)(lr=lr, **options)
 
 
 def scipy_objective(net, x, loss_fn: Callable, order: int = 1, directions=None):

@@ -21,7 +21,7 @@ from .._npz import load_npz, save_npz
 from .._validation import as_points, check_order
 from ..errors import ModelFileError
 from ..nn.mlp import ResidualMLP
-from ..nn.optim import _OPTIMIZERS
+from ..nn.optim import optimizer_class
 
 __all__ = ["SphericalNeuralSurface"]
 
@@ -374,12 +374,15 @@ def _check_checkpoint(data, source, n_theta):
         raise ModelFileError(f"{source}: optimiser state without field 'opt.kind'")
     if "opt.kind" in data:
         kind = _npz.field(data, "opt.kind", source, kinds="U", what="text")
-        classes = {cls.__name__: cls for cls in _OPTIMIZERS.values()}
-        if kind not in classes:
-            raise ModelFileError(f"{source}: field 'opt.kind' is {kind[:80]!r}, expected one "
-                                 f"of {', '.join(sorted(classes))}")
         try:
-            classes[kind].check_state_layout(layout, n_theta, prefix="opt.")
+            cls = optimizer_class(kind[:80])
+        except ValueError as exc:
+            raise ModelFileError(f"{source}: field 'opt.kind': {exc}") from None
+        if cls.__name__ != kind:
+            raise ModelFileError(f"{source}: field 'opt.kind' is {kind!r}, expected the "
+                                 f"class name {cls.__name__!r}")
+        try:
+            cls.check_state_layout(layout, n_theta, prefix="opt.")
         except ValueError as exc:
             raise ModelFileError(f"{source}: {exc}") from None
 
