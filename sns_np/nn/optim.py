@@ -621,6 +621,7 @@ class SOAP(Optimizer):
             ...
         ValueError: field 'QL0' must be a stack of matrices of numbers, got float64 of shape (8, 8)
         """
+        stems = {a for a, _ in _soap_state_shapes(1, 1, 1)}     # L, R, QL, QR, m, v
         for name, (shape, dtype) in layout.items():
             shape = tuple(shape)
             if name in ("rest_m", "rest_v"):
@@ -630,7 +631,7 @@ class SOAP(Optimizer):
                 ok, want = shape == (1,), "one number"
             else:
                 stem = name.rstrip("0123456789")
-                if stem not in {a for a, _ in _soap_state_shapes(1, 1, 1)} or stem == name:
+                if stem not in stems or stem == name:
                     raise ValueError(f"field {prefix + name!r} is not part of SOAP's state")
                 ok, want = len(shape) == 3, "a stack of matrices of numbers"
             if not ok or np.dtype(dtype).kind not in "fiu":
