@@ -12,7 +12,7 @@ import pytest
 from sns_np import SphericalNeuralSurface
 from sns_np._atomic import OutputBusyError, exclusive
 from sns_np._signals import deferred_signals
-from sns_np.errors import DivergenceError, FitInterrupted
+from sns_np.errors import DivergenceError, FitInterrupted, ModelFileError
 from sns_np.mesh import write_mesh
 from sns_np.nn import optim
 from sns_np.shapes import Ellipsoid
@@ -129,6 +129,20 @@ def test_divergence_leaves_the_checkpoint_it_names(tmp_path):
         fit_shape(E, steps=50, checkpoint=ck, checkpoint_every=10**6, callback=poison,
                   history_every=10, **TINY)
     assert repr(str(ck)) in str(caught.value) and _step_of(ck) == 10
+
+
+def test_a_checkpoint_of_other_soap_matrices_is_refused_with_its_path(tmp_path):
+    """A SOAP state written for other matrices (an earlier version preconditioned only the
+    hidden ones) names the checkpoint and what to do, before any step."""
+    ck = tmp_path / "ck.npz"
+    fit_shape(E, steps=8, checkpoint=ck, optimizer="soap", lr=1e-3, **TINY)
+    with np.load(ck) as data:
+        arrays = dict(data)
+    arrays["opt.L0"] = np.zeros((1, 4, 4))
+    np.savez(ck, **arrays)
+    with pytest.raises(ModelFileError, match="optimiser state that this fit's optimiser "
+                       "cannot take.*L0.*delete it"):
+        fit_shape(E, steps=8, checkpoint=ck, resume=True, optimizer="soap", lr=1e-3, **TINY)
 
 
 def test_a_second_fit_on_the_same_checkpoint_is_refused(tmp_path):

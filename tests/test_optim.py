@@ -296,6 +296,29 @@ def test_soap_shortens_a_gradient_far_longer_than_its_running_mean():
         dict(state, gnorm=np.ones(1)))._state
 
 
+def test_soap_second_moment_decay_is_short_for_the_first_steps():
+    """early_b2 = (b, T): for T steps SOAP is SOAP with betas (0.9, b); after them the decay
+    is betas[1], and the bias correction stays one over the weight the running mean has
+    gathered (w_t = b_t w_(t-1) + 1 - b_t)."""
+    grad, blocks, theta0 = _matrix_problem()
+    T = 6
+    early = SOAP(lr=0.01, matrices=blocks, every=3, early_b2=(0.9, T))
+    plain = SOAP(lr=0.01, matrices=blocks, every=3, betas=(0.9, 0.9), early_b2=None)
+    a, b = theta0.copy(), theta0.copy()
+    for t in range(1, 2 * T + 1):
+        early.step(a, grad(a))
+        plain.step(b, grad(b))
+        if t == T:
+            assert np.array_equal(a, b)
+    assert np.abs(a - b).max() > 1e-6
+    w = 0.0
+    for t in range(1, 4 * T):
+        b_t, c2 = early._second_decay(t)
+        assert b_t == (0.9 if t <= T else 0.999)
+        w = b_t * w + 1.0 - b_t
+        assert c2 == pytest.approx(1.0 / w, rel=1e-12)
+
+
 def test_soap_converges_and_its_state_round_trip_continues_identically():
     grad, blocks, theta = _matrix_problem()
     opt = SOAP(lr=0.05, matrices=blocks, every=3)
@@ -339,6 +362,9 @@ def test_soap_trains_a_network_through_make_optimizer():
     ({"clip": float("nan")}, "clip must be finite"),
     ({"every": 0}, "every"),
     ({"betas": (0.9, 1.0)}, r"betas must lie in \[0, 1\)"),
+    ({"early_b2": (1.0, 10)}, r"early_b2's decay must lie in \[0, 1\)"),
+    ({"early_b2": (0.95, 0)}, "early_b2's steps"),
+    ({"early_b2": 0.95}, r"early_b2 must be a pair \(decay, steps\) or None"),
 ])
 def test_soap_bad_constants_are_named(options, match):
     with pytest.raises(ValueError, match=match):

@@ -29,7 +29,7 @@ from .._validation import (
     as_generator,
     check_choice,
 )
-from ..errors import DivergenceError, FitInterrupted
+from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import make_optimizer
@@ -384,7 +384,12 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                                                           "normal_deg", "lr", "seconds")}, 0.0
         opt = make_optimizer(o["optimizer"], _schedule(o), **_optimizer_options(o, net))
         if state is not None:
-            opt.load_state_dict(state["opt"])
+            try:
+                opt.load_state_dict(state["opt"])
+            except ValueError as err:   # e.g. SOAP's matrices of an earlier version
+                raise ModelFileError(
+                    f"{checkpoint} holds an optimiser state that this fit's optimiser cannot "
+                    f"take ({err}); delete it or pass another checkpoint path") from None
         sampler = ErrorSampler(target, o["batch"]) if o["sampling"] == "error" else None
         if sampler is not None and state is not None:
             sampler.load_state_dict(state["sampler"])
