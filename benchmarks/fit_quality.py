@@ -79,7 +79,7 @@ POLE = 0.15
 
 def fit_options(args):
     keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "input_scale",
-            "normal_weight", "smooth", "sampling", "optimizer")
+            "normal_weight", "smooth", "sampling", "optimizer", "vertex_fraction")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -210,6 +210,7 @@ def run_case(case, args):
     shape = None
     if case in SHAPES:
         shape = _shape(case)
+        opts.pop("vertex_fraction", None)          # an analytic map has no vertices
         S, rep = fit_shape(shape, progress=not args.quiet, **opts)
         row["vertices"] = "-"
     else:
@@ -324,7 +325,7 @@ def main(argv=None):
                          f"followed by mesh cases (default: all)")
     for name, typ in (("width", int), ("depth", int), ("steps", int), ("batch", int),
                       ("lr", float), ("time-budget", float), ("input-scale", float),
-                      ("normal-weight", float)):
+                      ("normal-weight", float), ("vertex-fraction", float)):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])

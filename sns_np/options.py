@@ -72,6 +72,16 @@ class Real:
         check_positive_float(value, name, self.allow_zero)
 
 
+class Fraction:
+    """A number in [0, 1]."""
+
+    parse = float
+
+    def __call__(self, value, name):
+        if check_positive_float(value, name, allow_zero=True) > 1.0:
+            raise ValueError(f"{name} must lie in [0, 1], got {value!r}")
+
+
 class Choice:
     """One of a few strings."""
 
@@ -289,6 +299,9 @@ class FitOptions(Options):
         None, f"how training points are drawn: uniformly by area, or weighted by the recent "
         f"error with importance weights, the same objective (a mesh only; default: "
         f"{_auto('sampling')})", Choice(*SAMPLINGS), resume=True)
+    vertex_fraction: float = option(
+        0.0, "share of each batch drawn at the mesh's vertices, whose positions are the "
+        "mesh's only exact data (a mesh only)", Fraction(), resume=True)
     normal_weight: float | None = option(
         None, f"weight of the normal loss (default: {NORMAL_WEIGHT['embedding']:g} for a mesh, "
         f"{NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is exact)",

@@ -112,9 +112,11 @@ def test_sampler_state_round_trip_draws_the_same(target):
 
 
 @pytest.mark.slow_nojit
-def test_fit_with_error_sampling_resumes_exactly(tmp_path):
+@pytest.mark.parametrize("vertex_fraction", [0.0, 0.25])
+def test_fit_with_error_sampling_resumes_exactly(tmp_path, vertex_fraction):
     V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
-    opts = dict(steps=30, dtype="float64", sampling="error", **TINY)
+    opts = dict(steps=30, dtype="float64", sampling="error", vertex_fraction=vertex_fraction,
+                **TINY)
     S_full, r_full = fit_mesh(V, F, **opts)
     assert r_full.options["sampling"] == "error" and np.isfinite(r_full.normal_mean_deg)
     ck = tmp_path / "ck.npz"
@@ -146,3 +148,46 @@ def test_sampling_choice_and_refusals():
         fit_shape(Bobble(), sampling="error", **opts)
     with pytest.raises(ValueError, match="sampling"):
         fit_mesh(V, F, sampling="stratified", **opts)
+
+
+def test_vertex_samples_are_the_face_targets_at_the_corners(target):
+    """A vertex drawn by sample_vertices is the face target at a one-hot barycentric corner:
+    the same sphere point, the vertex itself (the Phong point at a corner) and its normal."""
+    p, q, n = target.sample_vertices(40, np.random.default_rng(1))
+    F = target.corr.F
+    i = np.argmin(np.linalg.norm(target.corr.Vs[None] - p[:, None], axis=2), axis=1)
+    face = np.argmax((F[None] == i[:, None, None]).any(axis=2), axis=1)
+    beta = (F[face] == i[:, None]).astype(float)
+    pf, qf, nf = target._points(face, beta)
+    assert np.allclose(p, pf, atol=1e-12) and np.allclose(q, qf, atol=1e-12)
+    assert np.allclose(n, nf, atol=1e-12)
+    assert np.allclose(q * target.scale + target.center, target.corr.V[i], atol=1e-12)
+
+
+def test_a_fit_draws_its_share_of_vertices(monkeypatch):
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    drawn = []
+    original = _MeshTarget.sample_vertices
+
+    def record(self, n, rng):
+        drawn.append(n)
+        return original(self, n, rng)
+
+    monkeypatch.setattr(_MeshTarget, "sample_vertices", record)
+    for sampling in ("area", "error"):
+        drawn.clear()
+        _, r = fit_mesh(V, F, steps=3, sampling=sampling, vertex_fraction=0.3, **TINY)
+        assert drawn == [77] * 3 and r.options["vertex_fraction"] == 0.3   # 0.3 x 256
+    drawn.clear()
+    fit_mesh(V, F, steps=2, sampling="error", vertex_fraction=1.0, **TINY)
+    assert drawn == [256] * 2                                # no face samples at all
+    drawn.clear()
+    fit_mesh(V, F, steps=2, **TINY)
+    assert drawn == []                                       # the default: faces only
+
+
+def test_vertex_fraction_refusals():
+    with pytest.raises(ValueError, match="vertex_fraction=0.5 needs a mesh target"):
+        fit_shape(Bobble(), steps=2, vertex_fraction=0.5, **TINY)
+    with pytest.raises(ValueError, match=r"vertex_fraction must lie in \[0, 1\], got 1.5"):
+        fit_mesh(*Ellipsoid(1.0, 1.3, 0.7).mesh(1), steps=2, vertex_fraction=1.5, **TINY)

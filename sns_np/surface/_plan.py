@@ -99,6 +99,9 @@ def _plan(target, o, net, elapsed=0.0):
         raise ValueError("sampling='error' needs a mesh target (fit_mesh), whose faces carry "
                          "the error; this target draws its points itself: use "
                          "sampling='area'")
+    if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
+        raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
+                         f"(fit_mesh); an analytic map has no vertices: use 0")
     if o["sampling"] is None and not cells:
         o["sampling"] = "area"
         choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "

@@ -56,6 +56,13 @@ class _MeshTarget:
         from ..mesh import uniform_barycentric
         return self._points(face, uniform_barycentric(len(face), rng))
 
+    def sample_vertices(self, n, rng):
+        """``n`` vertices drawn uniformly: ``(p, q, normals)`` at the vertices themselves,
+        where the mesh's positions are exact (between them they are interpolated)."""
+        i = rng.integers(0, len(self.corr.V), n)
+        return (self.corr.Vs[i], (self.corr.V[i] - self.center) / self.scale,
+                self.corr.N[i])
+
     def _points(self, face, beta):
         """``(p, q, normals)`` of the points ``beta`` of faces ``face``."""
         return (self.corr.to_sphere(face, beta), *self._targets(face, beta))

@@ -296,6 +296,12 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         carrying the importance weight that keeps the expected loss the uniform one
         (:mod:`sns_np.surface._adaptive`). Default: chosen from the target's detail
         (``AUTO``, docs/fitting.md); ``"area"`` for an analytic map and a warm start.
+    vertex_fraction : float in [0, 1]
+        Share of each batch drawn at the mesh's vertices (uniformly, importance weight 1),
+        the rest as ``sampling`` says. A mesh's vertices are its only exact data: between
+        them positions and normals are interpolated, and a mesh of a smooth surface carries
+        the interpolation's error into its targets (docs/fitting.md, "The paper's shapes").
+        0 (default) draws on the faces only; a mesh only.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md).
@@ -404,6 +410,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         t0 = time.perf_counter() - elapsed0
         w = o["normal_weight"]
         tw = o["tangent_weight"]
+        n_vertices = int(round(o["vertex_fraction"] * o["batch"]))
+        n_faces = o["batch"] - n_vertices
         order = 1 if w else 0
         ema_pos = ema_nrm = None
         stopped = "step budget"
@@ -427,11 +435,19 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                 while step < total:
                     rng_at_step = rng.bit_generator.state
                     if sampler is None:
-                        p, q, nt = target.sample(o["batch"], rng)
-                        wc = errors = None
+                        p, q, nt = target.sample(n_faces, rng)
+                        wts = errors = None
                     else:       # drawn where the error is, weighted back to the same loss
-                        p, q, nt, wts = sampler.sample(o["batch"], rng)
-                        wc, errors = wts.astype(t_dtype), np.empty(len(p))
+                        p, q, nt, wts = sampler.sample(n_faces, rng)
+                    if n_vertices:
+                        pv, qv, nv = target.sample_vertices(n_vertices, rng)
+                        p, q, nt = np.concatenate([p, pv]), np.concatenate([q, qv]), \
+                            np.concatenate([nt, nv])
+                        if wts is not None:
+                            wts = np.concatenate([wts, np.ones(n_vertices)])
+                    wc = None if wts is None else wts.astype(t_dtype)
+                    if sampler is not None:
+                        errors = np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
@@ -464,7 +480,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     updating = True
                     opt.step(net.theta, grad)
                     if sampler is not None:
-                        sampler.observe(errors)
+                        sampler.observe(errors[:n_faces])
                     step += 1
                     if o["readout_every"] and step % o["readout_every"] == 0:
                         if o["readout"] == "gn":
