@@ -300,7 +300,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         Share of each batch drawn at the mesh's vertices (uniformly, importance weight 1),
         the rest as ``sampling`` says. A mesh's vertices are its only exact data: between
         them positions and normals are interpolated, and a mesh of a smooth surface carries
-        the interpolation's error into its targets (docs/fitting.md, "The paper's shapes").
+        the interpolation's error into its targets (docs/fitting.md, "The mesh's vertices").
         0 (default) draws on the faces only; a mesh only.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
