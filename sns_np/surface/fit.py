@@ -434,20 +434,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
             with signals:
                 while step < total:
                     rng_at_step = rng.bit_generator.state
-                    if sampler is None:
-                        p, q, nt = target.sample(n_faces, rng)
-                        wts = errors = None
-                    else:       # drawn where the error is, weighted back to the same loss
-                        p, q, nt, wts = sampler.sample(n_faces, rng)
-                    if n_vertices:
-                        pv, qv, nv = target.sample_vertices(n_vertices, rng)
-                        p, q, nt = np.concatenate([p, pv]), np.concatenate([q, qv]), \
-                            np.concatenate([nt, nv])
-                        if wts is not None:
-                            wts = np.concatenate([wts, np.ones(n_vertices)])
+                    p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
-                    if sampler is not None:
-                        errors = np.empty(len(p))
+                    errors = None if sampler is None else np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
@@ -568,6 +557,23 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 #: the keyword arguments of fit_sampler that fit_mesh and fit_shape pass through
 _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resume", "progress",
            "callback", "history_every", "source")
+
+
+def _draw(target, sampler, n_faces, n_vertices, rng):
+    """One batch: ``n_faces`` points on the faces (by ``sampler`` if any: drawn where the
+    error is, weighted back to the same loss), then ``n_vertices`` vertices (weight 1).
+    Returns ``(p, q, normals, weights or None)``."""
+    if sampler is None:
+        p, q, nt = target.sample(n_faces, rng)
+        wts = None
+    else:
+        p, q, nt, wts = sampler.sample(n_faces, rng)
+    if n_vertices:
+        pv, qv, nv = target.sample_vertices(n_vertices, rng)
+        p, q, nt = np.concatenate([p, pv]), np.concatenate([q, qv]), np.concatenate([nt, nv])
+        if wts is not None:
+            wts = np.concatenate([wts, np.ones(n_vertices)])
+    return p, q, nt, wts
 
 
 def _optimizer_options(o, net):
