@@ -204,6 +204,29 @@ def test_chunking_does_not_change_jets():
         assert np.allclose(pa, pb, rtol=1e-13, atol=1e-15)
 
 
+def test_small_kernels_are_compiled_once_per_dtype():
+    # every argument layout is a separate Numba compilation (seconds each in a fresh
+    # environment): axes, given directions, read-only and strided inputs share one
+    from sns_np.nn import _kernels as K
+    net = make_net(10, 2, True)
+    x = np.random.default_rng(4).standard_normal((20, 3))
+    ro = x.copy()
+    ro.flags.writeable = False
+    D = np.random.default_rng(5).standard_normal((20, 3, 2))
+    for order in (0, 1, 2):
+        net.jet(x, order)
+    net.jet(ro, 1)
+    net.jet(np.asfortranarray(x), 2)
+    net.jet(x, 2, directions=D)
+    net.jet(x, 1, directions=D[:, :, ::-1])
+    net.vjp(x, np.ones((20, 3)))
+    net.vjp(ro, np.ones((20, 3)))
+    for kernel in (K.small_forward, K.small_vjp):
+        layouts = {(sig[0].layout, sig[0].mutable, sig[1].layout, sig[1].mutable)
+                   for sig in kernel.signatures}
+        assert layouts == {("C", True, "C", True)}, (kernel.__name__, kernel.signatures)
+
+
 @pytest.mark.parametrize("width", [10, 64])
 def test_float32_network_agrees_with_float64(width):
     n64 = make_net(width, 2, True)

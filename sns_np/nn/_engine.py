@@ -71,6 +71,14 @@ def _grad_views(net, grad):
     return {name: grad[sl].reshape(shape) for name, (sl, shape) in net.param_slices().items()}
 
 
+def _small_layout(a):
+    """``a`` as the small kernels take it: C-contiguous and writable. Numba compiles a kernel
+    once per argument layout (seconds each, on the first call in a fresh environment), so
+    broadcast or read-only directions are copied (n x in_dim x m numbers, small beside the
+    jet) rather than compiled for."""
+    return np.require(a, requirements=("C", "W"))
+
+
 def _eye_directions(net, n, m):
     """The first m coordinate axes as directions (n, in_dim, m), without a copy per point."""
     return np.broadcast_to(np.eye(net.in_dim, m, dtype=net.dtype), (n, net.in_dim, m))
@@ -94,6 +102,7 @@ def forward_small(net, x, D, m, k, Y):
     """The small-width path: one Numba kernel, one point per iteration."""
     if D is None:
         D = _eye_directions(net, x.shape[0], m)
+    x, D = _small_layout(x), _small_layout(D)
     b0, b1, b2, b3 = _biases(net)
     kern.start_threads()
     kern.small_forward(x, D, net.W0, b0, net.W1, b1, net.W2, b2, net.W3, b3, net.bias, m, k, Y)
@@ -232,6 +241,7 @@ def value_and_grad_small(net, x, D, m, loss_fn, grad):
     S = 1 + m
     if D is None:
         D = _eye_directions(net, n, max(m, 1))
+    x, D = _small_layout(x), _small_layout(D)
     Y = np.empty((n, S, net.out_dim), net.dtype)
     b0, b1, b2, b3 = _biases(net)
     kern.start_threads()
