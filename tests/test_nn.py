@@ -208,6 +208,8 @@ def test_small_kernels_are_compiled_once_per_dtype():
     # every argument layout is a separate Numba compilation (seconds each in a fresh
     # environment): axes, given directions, read-only and strided inputs share one
     from sns_np.nn import _kernels as K
+    if not hasattr(K.small_forward, "signatures"):
+        pytest.skip("Numba's JIT is disabled (NUMBA_DISABLE_JIT=1): nothing is compiled")
     net = make_net(10, 2, True)
     x = np.random.default_rng(4).standard_normal((20, 3))
     ro = x.copy()
