@@ -9,6 +9,21 @@ MESH_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "mes
 NOJIT = os.environ.get("NUMBA_DISABLE_JIT", "0") == "1"
 
 
+def _subprocesses_import_this_sns_np():
+    """Subprocesses (the CLI, examples, dask workers) import the sns_np these tests import.
+    Under ``python -m pytest`` in a checkout that is the checkout, while a subprocess started
+    elsewhere would import the installed copy: the same code, but a second Numba cache, so
+    every kernel signature was compiled twice in a fresh environment (over a minute in CI)."""
+    import sns_np
+    root = Path(sns_np.__file__).resolve().parents[1]
+    if (root / "pyproject.toml").is_file():          # a checkout, not site-packages
+        rest = [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]
+        os.environ["PYTHONPATH"] = os.pathsep.join([str(root)] + rest)
+
+
+_subprocesses_import_this_sns_np()
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
