@@ -201,8 +201,7 @@ def test_a_worker_killed_mid_fit_is_rescheduled_and_resumes(meshes, tmp_path, cl
 @pytest.mark.slow
 def test_cli_against_a_scheduler_and_worker_started_apart(meshes, tmp_path):
     _distributed()
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(ROOT)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    env = dict(os.environ)       # conftest: the workers import the sns_np the tests import
     sfile = tmp_path / "scheduler.json"
     procs = [subprocess.Popen([sys.executable, "-m", "dask", "scheduler", "--host", "127.0.0.1",
                                "--port", "0", "--dashboard-address", ":0", "--scheduler-file",
