@@ -12,7 +12,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,7 +22,6 @@ from sns_np.shapes import Ellipsoid
 
 from .conftest import run_cli
 
-ROOT = Path(__file__).resolve().parents[1]
 NEEDS_DASK = "needs the optional extra 'distributed' (pip install \"sns-np[distributed]\")"
 TINY = dict(width=8, depth=1, steps=10, batch=64, n_eval=100, dtype="float64", lr=1e-3,
             input_scale=4.0, warmup=5)          # all given: no detail probe
