@@ -5,9 +5,15 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
-from sns_np.options import NORMAL_WEIGHT
+from sns_np.options import JACOBIAN_WEIGHT, NORMAL_WEIGHT
 from sns_np.shapes import Ellipsoid
-from sns_np.surface import SphericalNeuralSurface, fit_mesh, fit_shape, position_normal_loss
+from sns_np.surface import (
+    SphericalNeuralSurface,
+    fit_mesh,
+    fit_shape,
+    jacobian_loss,
+    position_normal_loss,
+)
 from sns_np.testing import check_directional_jet, check_jet
 
 from .conftest import sphere_points
@@ -74,6 +80,52 @@ def test_position_normal_loss_cotangents_by_differences():
         e = np.zeros_like(JD)
         e[idx] = h
         assert np.isclose((f(y, JD + e) - f(y, JD - e)) / (2 * h), dJD[idx], atol=1e-8)
+
+
+def test_jacobian_loss_cotangent_by_differences():
+    g = np.random.default_rng(1)
+    JD, JT = g.standard_normal((5, 3, 2)), g.standard_normal((5, 3, 2))
+    val, dJD, sq = jacobian_loss(JD, JT, 9, weight=0.7)
+    assert np.isclose(val, 0.7 * np.sum((JD - JT) ** 2) / 9) and np.isclose(sq, val * 9 / 0.7)
+    h = 1e-6
+    for idx in np.ndindex(*JD.shape):
+        e = np.zeros_like(JD)
+        e[idx] = h
+        fd = (jacobian_loss(JD + e, JT, 9, 0.7)[0] - jacobian_loss(JD - e, JT, 9, 0.7)[0]) / (2 * h)
+        assert np.isclose(fd, dJD[idx], atol=1e-8)
+
+
+def _tangent_jacobian_error(S, shape, n=2000):
+    """Held-out mean Frobenius error of the derivatives along the sphere, in shape units."""
+    from sns_np.geometry import tangent_frame
+    p = sphere_points(n, seed=7)
+    R = tangent_frame(p)
+    return float(np.linalg.norm(np.einsum("kia,kab->kib", S.jet(p, 1)[1] - shape.jet(p, 1)[1],
+                                          R), axis=(1, 2)).mean())
+
+
+@pytest.mark.slow_nojit
+def test_jacobian_weight_is_chosen_for_an_analytic_map_and_fits_its_derivatives():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    opts = dict(TINY, width=16, steps=150, lr=3e-3)
+    S0, r0 = fit_shape(E, jacobian_weight=0.0, **opts)
+    S1, r1 = fit_shape(E, **opts)                       # the default for an analytic map
+    assert r1.options["jacobian_weight"] == JACOBIAN_WEIGHT["exact"] == 1.0
+    assert "exact data" in r1.choices["jacobian_weight"]["why"]
+    assert "jacobian_weight" not in r0.choices          # given, so not chosen
+    assert _tangent_jacobian_error(S1, E) < 0.7 * _tangent_jacobian_error(S0, E)
+
+
+def test_jacobian_weight_needs_exact_derivatives():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    V, F = E.mesh(1)
+    with pytest.raises(ValueError, match="jacobian_weight=1 needs a target with exact"):
+        fit_mesh(V, F, jacobian_weight=1.0, Vs="not an embedding")    # before the embedding
+    with pytest.raises(ValueError, match="jacobian_weight must be finite and >= 0, got -1"):
+        fit_shape(E, jacobian_weight=-1.0, **TINY)
+    S, r = fit_mesh(V, F, steps=2, **TINY)
+    assert r.options["jacobian_weight"] == JACOBIAN_WEIGHT["embedding"] == 0.0
+    assert "no exact derivatives" in r.choices["jacobian_weight"]["why"]
 
 
 @pytest.mark.slow_nojit
@@ -227,7 +279,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
-                              "optimizer"}
+                              "optimizer", "jacobian_weight"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)

@@ -10,7 +10,7 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, DETAIL_RANGE, NORMAL_WEIGHT
+from ..options import AUTO, DETAIL_RANGE, JACOBIAN_WEIGHT, NORMAL_WEIGHT
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
@@ -90,6 +90,12 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
     return float(np.sqrt((r ** 2).sum(axis=1).mean()))
 
 
+#: the error for a Jacobian weight on a target without exact derivatives (a mesh)
+NO_JACOBIAN = ("jacobian_weight={:g} needs a target with exact derivatives along the sphere "
+               "(fit_shape, an analytic map); a mesh's are those of its piecewise-linear "
+               "spherical embedding, not data to match: use 0")
+
+
 def _plan(target, o, net, elapsed=0.0):
     """Fill the options left to "auto" (None) from the target's detail; returns the choices
     made (option -> {"value", "why"})."""
@@ -102,6 +108,9 @@ def _plan(target, o, net, elapsed=0.0):
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
+    exact = hasattr(target, "tangent_jacobian")     # derivatives along the sphere as data
+    if o["jacobian_weight"] and not exact:
+        raise ValueError(NO_JACOBIAN.format(o["jacobian_weight"]))
     if o["sampling"] is None and not cells:
         o["sampling"] = "area"
         choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "
@@ -142,6 +151,12 @@ def _plan(target, o, net, elapsed=0.0):
             "why": "an exact parametrisation (an analytic map): the position term leads"
                    if kind == "exact" else "a parametrisation through a spherical embedding: "
                    "the normals steer the fit past its tangential noise"}
+    if o["jacobian_weight"] is None:
+        o["jacobian_weight"] = JACOBIAN_WEIGHT["exact" if exact else "embedding"]
+        choices["jacobian_weight"] = {
+            "value": o["jacobian_weight"],
+            "why": "an analytic map: its derivatives along the sphere are exact data" if exact
+                   else "no exact derivatives (a mesh's are its embedding's, piecewise linear)"}
     if o["steps"] is None:
         choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
                             "learning rate decays with the time elapsed"}

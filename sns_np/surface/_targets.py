@@ -96,11 +96,19 @@ class _ShapeTarget:
         return p, q, nrm
 
     def evaluate_at(self, p):
+        return self._jet(p)[:2]
+
+    def tangent_jacobian(self, p):
+        """The map's derivatives along ``tangent_frame(p)``, (n, 3, 2), in the normalised
+        frame: the exact data of the Jacobian loss."""
+        return self._jet(p)[2]
+
+    def _jet(self, p):
         from ..protocol import surface_jet
         y, J = surface_jet(self.shape, p, 1)
         JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
-        return (y - self.center) / self.scale, nrm
+        return (y - self.center) / self.scale, nrm, JR / self.scale
 
 
 def _fingerprint(V, F):

@@ -15,6 +15,10 @@ Cotangents, with g = dL/dc:
     dL/dn   = 2 lambda (n - n_i) / N
     g       = (I - n n^T) dL/dn / |c|         (derivative of c -> c / |c|)
     dL/dS_u = S_v x g,   dL/dS_v = g x S_u     (from d(S_u x S_v) . g)
+
+Jacobian loss (an analytic map, whose derivatives along the sphere are exact data):
+
+    loss = mu 1/N sum |JD_i - T_i|^2_F,     dL/dJD = 2 mu (JD - T) / N
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import numpy as np
 # the one normal function (geometry owns it); re-exported here and from sns_np.surface
 from ..geometry.forms import normals_from_tangents
 
-__all__ = ["normals_from_tangents", "position_normal_loss"]
+__all__ = ["jacobian_loss", "normals_from_tangents", "position_normal_loss"]
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
@@ -109,3 +113,31 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     dJD[:, :, 0] = np.cross(Sv, g)
     dJD[:, :, 1] = np.cross(g, Su)
     return loss, dy, dJD, parts
+
+
+def jacobian_loss(JD, JT, n_total, weight=1.0):
+    """Squared error of the derivatives along the sphere on one chunk, and its cotangent.
+
+    Parameters
+    ----------
+    JD : (c, 3, 2) float array, the network's derivatives along e_u, e_v
+    JT : (c, 3, 2) float array, the target's derivatives along the same directions
+    n_total : int, the number N of points in the whole batch (the mean's denominator)
+    weight : float, mu
+
+    Returns
+    -------
+    loss : float (this chunk's contribution), dJD : (c, 3, 2) float array, sq : float (the
+    chunk's summed squared error, unweighted)
+
+    Examples
+    --------
+    >>> JD = np.zeros((2, 3, 2))
+    >>> JT = np.zeros((2, 3, 2)); JT[0, 0, 0] = 1.0
+    >>> loss, dJD, sq = jacobian_loss(JD, JT, 2, weight=0.5)
+    >>> loss, float(dJD[0, 0, 0]), sq                  # 0.5 * 1 / 2, 2 * 0.5 * (0 - 1) / 2
+    (0.25, -0.5, 1.0)
+    """
+    E = JD - JT
+    sq = float(np.einsum("kia,kia->", E, E))
+    return weight * sq / n_total, (2.0 * weight / n_total) * E, sq
