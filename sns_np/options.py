@@ -235,7 +235,7 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 #: that "auto" chooses. An analytic map's derivatives are exact data: matching them puts the
 #: first derivatives under direct control and the second ones (curvature) follow (fit_shape,
 #: 1,500 steps, H error at the closest point: BOBBLE 19.3% -> 8.3%, FLOWER 161% -> 44%,
-#: TREE 54% -> 11%; flat from weight 0.1 to 10; docs/fitting.md, "The paper's shapes"). A
+#: TREE 54% -> 11%; flat from weight 0.1 to 10; docs/fitting.md, "The Jacobian loss"). A
 #: mesh's are those of its piecewise-linear embedding, tangential noise to steer past: 0.
 JACOBIAN_WEIGHT = {"embedding": 0.0, "exact": 1.0}
 

@@ -221,7 +221,8 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
 def fit_shape(shape, **options):
     """Fit a SphericalNeuralSurface directly to an analytic surface map (as the paper does).
 
-    Sphere points are drawn uniformly; targets are ``shape(p)`` and its exact normals.
+    Sphere points are drawn uniformly; targets are ``shape(p)``, its exact normals and its
+    derivatives along the sphere (``jacobian_weight``).
     Options as :func:`fit_sampler`. Returns (surface, report).
 
     Examples
@@ -290,7 +291,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         |dS(e_v) - dS_t(e_v)|^2`` (:func:`~sns_np.surface.losses.jacobian_loss`), for a
         target with exact derivatives (``tangent_jacobian(p)``: an analytic map). Default
         (``JACOBIAN_WEIGHT``): 1 for an analytic map, where it cuts the curvature error
-        severalfold at no cost per step (the normal term already needs the derivatives); 0
+        severalfold for a second jet of the map per step (the network's derivatives are
+        those the normal term already needs); 0
         for a mesh, whose derivatives are its embedding's, and any other target (a mesh
         refuses a positive weight).
     dtype : {"float32", "float64"}
