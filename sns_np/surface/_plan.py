@@ -108,7 +108,7 @@ def _plan(target, o, net, elapsed=0.0):
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
-    exact = hasattr(target, "tangent_jacobian")     # derivatives along the sphere as data
+    exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
     if o["jacobian_weight"] and not exact:
         raise ValueError(NO_JACOBIAN.format(o["jacobian_weight"]))
     if o["sampling"] is None and not cells:

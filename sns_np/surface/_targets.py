@@ -12,7 +12,7 @@ import hashlib
 
 import numpy as np
 
-from ..geometry import tangent_frame
+from ..geometry import tangent_frame, tangent_jacobian
 from ..sampling import uniform_sphere
 from .losses import normals_from_tangents
 
@@ -91,22 +91,22 @@ class _ShapeTarget:
         self.fingerprint = f"shape:{type(shape).__name__}:{_fingerprint(y[:64], None)}"
 
     def sample(self, n, rng):
+        return self.sample_jet(n, rng)[:3]
+
+    def sample_jet(self, n, rng):
+        """``sample``'s points with the map's derivatives along ``tangent_frame(p)`` in the
+        normalised frame, the exact data of the Jacobian loss: ``(p, q, normals, JT)``, JT
+        (n, 3, 2); one jet of the map for both."""
         p = uniform_sphere(n, rng)
-        q, nrm = self.evaluate_at(p)
-        return p, q, nrm
+        return (p, *self._jet(p))
 
     def evaluate_at(self, p):
         return self._jet(p)[:2]
 
-    def tangent_jacobian(self, p):
-        """The map's derivatives along ``tangent_frame(p)``, (n, 3, 2), in the normalised
-        frame: the exact data of the Jacobian loss."""
-        return self._jet(p)[2]
-
     def _jet(self, p):
         from ..protocol import surface_jet
         y, J = surface_jet(self.shape, p, 1)
-        JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
+        JR = tangent_jacobian(J, tangent_frame(p))
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
         return (y - self.center) / self.scale, nrm, JR / self.scale
 

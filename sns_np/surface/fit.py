@@ -258,8 +258,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         normals)`` in the normalised frame, and attributes ``center``, ``scale``,
         ``bbox_diagonal``, ``fingerprint``; optionally ``parametrisation``, ``"exact"``
         for an analytic map (the default normal weight depends on it; any other target is
-        treated as a mesh's ``"embedding"``), and ``tangent_jacobian(p) -> (n, 3, 2)``,
-        the exact derivatives along ``tangent_frame(p)`` (the Jacobian loss's data)
+        treated as a mesh's ``"embedding"``), and ``sample_jet(n, rng) -> (p, q, normals,
+        JT)``, ``sample``'s points with the exact derivatives JT (n, 3, 2) along
+        ``tangent_frame(p)`` (the Jacobian loss's data)
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
@@ -289,7 +290,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     jacobian_weight : float
         Weight of the loss on the derivatives along the sphere, ``|dS(e_u) - dS_t(e_u)|^2 +
         |dS(e_v) - dS_t(e_v)|^2`` (:func:`~sns_np.surface.losses.jacobian_loss`), for a
-        target with exact derivatives (``tangent_jacobian(p)``: an analytic map). Default
+        target with exact derivatives (``sample_jet``: an analytic map). Default
         (``JACOBIAN_WEIGHT``): 1 for an analytic map, where it cuts the curvature error
         severalfold for a second jet of the map per step (the network's derivatives are
         those the normal term already needs); 0
@@ -457,14 +458,18 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
             with signals:
                 while step < total:
                     rng_at_step = rng.bit_generator.state
-                    p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
+                    if wj:      # an analytic map: no sampler, no vertices (_plan)
+                        p, q, nt, JT = target.sample_jet(n_faces, rng)
+                        wts = None
+                    else:
+                        p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
                     errors = None if sampler is None else np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
                     parts = {"position": 0.0, "normal": 0.0}
-                    JT = target.tangent_jacobian(p).astype(t_dtype) if wj else None
+                    JTc = JT.astype(t_dtype) if wj else None
 
                     def loss_fn(y, JD, sl):
                         val, dy, dJD, pr = position_normal_loss(
@@ -472,7 +477,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                             sample_weight=None if wc is None else wc[sl],
                             pointwise=errors is not None)
                         if wj:
-                            val_j, dJD_j, _ = jacobian_loss(JD, JT[sl], len(p), wj)
+                            val_j, dJD_j, _ = jacobian_loss(JD, JTc[sl], len(p), wj)
                             val += val_j
                             dJD = dJD_j if dJD is None else dJD + dJD_j
                         parts["position"] += pr["position"]
