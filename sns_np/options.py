@@ -37,8 +37,8 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
-           "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES",
-           "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
+           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -239,6 +239,11 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 #: mesh's are those of its piecewise-linear embedding, tangential noise to steer past: 0.
 JACOBIAN_WEIGHT = {"embedding": 0.0, "exact": 1.0}
 
+#: the weight of the Hessian loss (the second derivatives along the sphere,
+#: ``losses.hessian_loss``) that "auto" chooses: exact data for an analytic map, none for a
+#: mesh (its embedding is piecewise linear).
+HESSIAN_WEIGHT = {"embedding": 0.0, "exact": 0.0}
+
 #: checkpoint cadence of a fit (``checkpoint_every`` steps, ``checkpoint_seconds`` seconds,
 #: whichever comes first): a crash loses at most about a minute
 CHECKPOINT_STEPS = 500
@@ -317,6 +322,10 @@ class FitOptions(Options):
     jacobian_weight: float | None = option(
         None, f"weight of the loss on the derivatives along the sphere (default: "
         f"{JACOBIAN_WEIGHT['exact']:g} for an analytic map, whose derivatives are exact; a "
+        f"mesh only takes 0)", Real(allow_zero=True), resume=True)
+    hessian_weight: float | None = option(
+        None, f"weight of the loss on the second derivatives along the sphere (default: "
+        f"{HESSIAN_WEIGHT['exact']:g} for an analytic map, whose derivatives are exact; a "
         f"mesh only takes 0)", Real(allow_zero=True), resume=True)
     dtype: str = option("float32", "training precision; the result is float64",
                         Choice("float32", "float64"), resume=True)

@@ -433,3 +433,80 @@ def test_fit_readout_rejects_bad_input_and_keeps_a_non_finite_fit_out():
     before = net.pack()
     T = net.fit_readout(x, np.full((50, 3), np.nan))
     assert not np.all(np.isfinite(T)) and np.array_equal(net.pack(), before)
+
+
+def _second_order_loss(net, x, D, k, seed):
+    """A quadratic loss on y, JD and D2D (k pairs) and, per chunk, its cotangents; the loss
+    alone from net.jet for the central differences."""
+    g = np.random.default_rng(seed)
+    n, m = D.shape[0], D.shape[2]
+    T0, T1 = g.standard_normal((n, 3)), g.standard_normal((n, 3, m))
+    T2 = g.standard_normal((n, 3, k, k))
+    T2 = T2 + np.swapaxes(T2, 2, 3)
+
+    def loss_fn(y, JD, D2D, sl):
+        r, e, h = y - T0[sl], JD - T1[sl], D2D - T2[sl]
+        return ((r ** 2).sum() + 0.5 * (e ** 2).sum() + 0.3 * (h ** 2).sum(),
+                2 * r, e, 0.6 * h)
+
+    def fun(theta):
+        net.unpack(theta)
+        y, JD, D2D = net.jet(x, 2, directions=D, second=k)
+        return (loss_fn(y, JD, D2D, slice(None))[0],
+                net.value_and_grad(x, loss_fn, order=2, directions=D, second=k)[1])
+    return fun, loss_fn
+
+
+@pytest.mark.parametrize("width,depth,bias", [(48, 2, True), (10, 1, False), (40, 0, True)])
+@pytest.mark.parametrize("m,k", [(3, 2), (2, 2), (3, 3)])
+def test_value_and_grad_of_second_derivatives_matches_central_differences(width, depth, bias,
+                                                                          m, k):
+    """Order 2: the reverse pass through the second-order jet rule (both paths: a width <= 32
+    takes the BLAS path too), every parameter family, against central differences."""
+    net = make_net(width, depth, bias, seed=11)
+    g = np.random.default_rng(12)
+    x = g.standard_normal((23, 3))
+    D = g.standard_normal((23, 3, m))
+    fun, loss_fn = _second_order_loss(net, x, D, k, 13)
+    err = check_gradient(fun, net.pack(), h=1e-5, n_directions=12, rng=0, richardson=True)
+    assert err < 1e-7, err
+    theta = net.pack()
+    y, JD, D2D = net.jet(x, 2, directions=D, second=k)
+    val, grad = net.value_and_grad(x, loss_fn, order=2, directions=D, second=k)
+    assert val == pytest.approx(loss_fn(y, JD, D2D, slice(None))[0], rel=1e-12)
+    net.chunk_size = 5                                       # chunking changes nothing
+    val5, grad5 = net.value_and_grad(x, loss_fn, order=2, directions=D, second=k)
+    assert val5 == pytest.approx(val, rel=1e-12)
+    np.testing.assert_allclose(grad5, grad, rtol=1e-10, atol=1e-13 * np.abs(grad).max())
+    assert np.array_equal(net.pack(), theta)
+
+
+def test_value_and_grad_second_order_agrees_with_first_order_without_second_cotangents():
+    """A loss that ignores D2D gives order 1's gradient: the extra streams only add."""
+    net = make_net(40, 2, True, seed=14)
+    g = np.random.default_rng(15)
+    x, D = g.standard_normal((31, 3)), g.standard_normal((31, 3, 3))
+    q = g.standard_normal((31, 3))
+
+    def loss1(y, JD, sl):
+        r = y - q[sl]
+        return (r ** 2).sum(), 2 * r, 0.2 * JD
+
+    def loss2(y, JD, D2D, sl):
+        return (*loss1(y, JD, sl), None)
+
+    v1, g1 = net.value_and_grad(x, loss1, order=1, directions=D)
+    v2, g2 = net.value_and_grad(x, loss2, order=2, directions=D, second=2)
+    assert v2 == pytest.approx(v1, rel=1e-13)
+    np.testing.assert_allclose(g2, g1, rtol=1e-11, atol=1e-14 * np.abs(g1).max())
+
+
+def test_value_and_grad_order_two_options_are_checked():
+    net = make_net(40, 1, False)
+    x = np.zeros((4, 3))
+    with pytest.raises(ValueError, match="second must be an integer in"):
+        net.value_and_grad(x, None, order=2, directions=np.ones((4, 3, 2)), second=3)
+    with pytest.raises(ValueError, match="second= needs order=2"):
+        net.value_and_grad(x, None, order=1, directions=np.ones((4, 3, 2)), second=1)
+    with pytest.raises(ValueError, match="order must be one of"):
+        net.value_and_grad(x, None, order=3)

@@ -173,3 +173,23 @@ def _child_jet(theta, x):
     net.unpack(theta)
     assert _parallel.plan(len(x), 37)[0] >= 1
     return net.jet(x, 1)[1]
+
+
+@needs_openblas
+def test_data_parallel_second_order_gradient_matches(two_workers, monkeypatch):
+    """Order 2 on worker threads (the serial second-order backward kernel) equals the
+    threaded path."""
+    net = make_net()
+    x = points(555)
+    D = np.random.default_rng(5).standard_normal((555, 3, 3))
+
+    def loss(y, JD, D2D, sl):
+        r = y - 1.3 * x[sl]
+        return float(np.sum(r * r) + 0.1 * np.sum(D2D * D2D)), 2 * r, 0.1 * JD, 0.2 * D2D
+
+    assert _parallel.plan(555, 37)[0] >= 2
+    l1, g1 = net.value_and_grad(x, loss, order=2, directions=D, second=2)
+    monkeypatch.setattr(_parallel, "_enabled", False)
+    l2, g2 = net.value_and_grad(x, loss, order=2, directions=D, second=2)
+    assert l1 == pytest.approx(l2, rel=1e-13)
+    np.testing.assert_allclose(g1, g2, rtol=1e-11, atol=1e-13 * np.abs(g2).max())

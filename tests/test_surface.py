@@ -5,12 +5,13 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
-from sns_np.options import JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from sns_np.options import HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
 from sns_np.shapes import Ellipsoid
 from sns_np.surface import (
     SphericalNeuralSurface,
     fit_mesh,
     fit_shape,
+    hessian_loss,
     jacobian_loss,
     position_normal_loss,
 )
@@ -95,6 +96,41 @@ def test_jacobian_loss_cotangent_by_differences():
         assert np.isclose(fd, dJD[idx], atol=1e-8)
 
 
+def test_hessian_loss_cotangents_by_differences():
+    g = np.random.default_rng(2)
+    D2D, T2 = g.standard_normal((4, 3, 2, 2)), g.standard_normal((4, 3, 2, 2))
+    D2D = D2D + np.swapaxes(D2D, 2, 3)
+    Jp = g.standard_normal((4, 3))
+    val, dD2D, dJp, sq = hessian_loss(D2D, Jp, T2, 7, weight=0.3)
+    S2 = D2D - Jp[:, :, None, None] * np.eye(2)
+    assert np.isclose(val, 0.3 * np.sum((S2 - T2) ** 2) / 7) and np.isclose(sq, val * 7 / 0.3)
+    h = 1e-6
+    for arr, grad in ((D2D, dD2D), (Jp, dJp)):
+        for idx in np.ndindex(*arr.shape):
+            e = np.zeros_like(arr)
+            e[idx] = h
+            up = (D2D + e, Jp) if arr is D2D else (D2D, Jp + e)
+            dn = (D2D - e, Jp) if arr is D2D else (D2D, Jp - e)
+            fd = (hessian_loss(*up, T2, 7, 0.3)[0] - hessian_loss(*dn, T2, 7, 0.3)[0]) / (2 * h)
+            assert np.isclose(fd, grad[idx], atol=1e-8)
+
+
+def test_shape_target_second_derivatives_are_the_charts():
+    """sample_jet's second derivatives are those geometry reads curvature from (same frame,
+    same normalisation), so the Hessian loss matches what curvature is computed from."""
+    from sns_np.geometry import tangent_frame
+    from sns_np.geometry.chart import chart_jets
+    from sns_np.surface.fit import _ShapeTarget
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    t = _ShapeTarget(E)
+    p, q, nt, JT, ST = t.sample_jet(50, np.random.default_rng(0), second=True)
+    y, JR, _, S2 = chart_jets(E, p, tangent_frame(p), 2)
+    np.testing.assert_allclose(ST * t.scale, S2, atol=1e-12)
+    np.testing.assert_allclose(JT * t.scale, JR, atol=1e-12)
+    np.testing.assert_allclose(q * t.scale + t.center, y, atol=1e-12)
+    assert t.sample_jet(5, np.random.default_rng(0))[4] is None
+
+
 def _tangent_jacobian_error(S, shape, n=2000):
     """Held-out mean Frobenius error of the derivatives along the sphere, in shape units."""
     from sns_np.geometry import tangent_frame, tangent_jacobian
@@ -120,11 +156,16 @@ def test_jacobian_weight_needs_exact_derivatives():
     V, F = E.mesh(1)
     with pytest.raises(ValueError, match="jacobian_weight=1 needs a target with exact"):
         fit_mesh(V, F, jacobian_weight=1.0, Vs="not an embedding")    # before the embedding
+    with pytest.raises(ValueError, match="hessian_weight=0.1 needs a target with exact"):
+        fit_mesh(V, F, hessian_weight=0.1, Vs="not an embedding")
+    with pytest.raises(ValueError, match="hessian_weight must be finite and >= 0, got -1"):
+        fit_shape(E, hessian_weight=-1.0, **TINY)
     with pytest.raises(ValueError, match="jacobian_weight must be finite and >= 0, got -1"):
         fit_shape(E, jacobian_weight=-1.0, **TINY)
     S, r = fit_mesh(V, F, steps=2, **TINY)
     assert r.options["jacobian_weight"] == JACOBIAN_WEIGHT["embedding"] == 0.0
     assert "no exact derivatives" in r.choices["jacobian_weight"]["why"]
+    assert r.options["hessian_weight"] == HESSIAN_WEIGHT["embedding"] == 0.0
 
 
 @pytest.mark.slow_nojit
@@ -278,7 +319,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
-                              "optimizer", "jacobian_weight"}
+                              "optimizer", "jacobian_weight", "hessian_weight"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)

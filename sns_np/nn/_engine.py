@@ -203,29 +203,39 @@ def unpack_streams(Y, order, m, k):
 
 # ---------------------------------------------------------------------------------- reverse
 
-def value_and_grad(net, x, D, m, loss_fn):
+def value_and_grad(net, x, D, m, loss_fn, k=0):
     """Fused forward, loss and backward pass at checked x (n, in_dim): ``(loss, grad)``.
 
-    ``D`` (n, in_dim, m) or None (the coordinate axes); m = 0 is the value alone. The contract
-    of ``loss_fn`` is that of :meth:`ResidualMLP.value_and_grad`.
+    ``D`` (n, in_dim, m) or None (the coordinate axes); m = 0 is the value alone; k > 0 adds
+    the second derivatives along the pairs of the first k directions. The contract of
+    ``loss_fn`` is that of :meth:`ResidualMLP.value_and_grad`.
     """
     grad = np.zeros(net.n_params, dtype=net.dtype)
     if x.shape[0] == 0:
         return 0.0, grad
-    if net.width <= SMALL_WIDTH:
+    if net.width <= SMALL_WIDTH and k == 0:   # the small kernels stop at first order
         return value_and_grad_small(net, x, D, m, loss_fn, grad)
-    return value_and_grad_blas(net, x, D, m, loss_fn, grad)
+    return value_and_grad_blas(net, x, D, m, loss_fn, grad, k)
 
 
-def pack_cotangents(dy, dJD, m, n, o, dtype):
-    """Stack the cotangents of y (n, o) and JD (n, o, m) as streams (n, 1 + m, o)."""
-    Ybar = np.empty((n, 1 + m, o), dtype)
+def pack_cotangents(dy, dJD, m, n, o, dtype, dD2=None, k=0):
+    """Stack the cotangents of y (n, o), JD (n, o, m) and D2D (n, o, k, k) as streams
+    (n, S, o). A stored pair (a, b), a < b, is both D2D[a, b] and D2D[b, a]: its cotangent
+    is the sum of theirs."""
+    Ybar = np.empty((n, n_streams(m, k), o), dtype)
     Ybar[:, 0, :] = dy
     if m:
         if dJD is None:
-            Ybar[:, 1:, :] = 0.0
+            Ybar[:, 1:1 + m, :] = 0.0
         else:
-            Ybar[:, 1:, :] = np.swapaxes(dJD, 1, 2)
+            Ybar[:, 1:1 + m, :] = np.swapaxes(dJD, 1, 2)
+    q = 1 + m
+    for a, b in pairs(k):
+        if dD2 is None:
+            Ybar[:, q, :] = 0.0
+        else:
+            Ybar[:, q, :] = dD2[:, :, a, b] + (dD2[:, :, b, a] if a != b else 0.0)
+        q += 1
     return Ybar
 
 
@@ -262,16 +272,16 @@ def value_and_grad_small(net, x, D, m, loss_fn, grad):
     return float(loss), grad
 
 
-def value_and_grad_blas(net, x, D, m, loss_fn, grad):
+def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0):
     """The BLAS path: chunk after chunk on all threads, or round-robin chunks per worker."""
     n = x.shape[0]
-    c = min(chunk_points(net, 1 + m), n)
+    c = min(chunk_points(net, n_streams(m, k)), n)
     plan = _parallel.plan(n, c)
     if plan is None:  # threaded products and threaded passes, chunk after chunk
         kern.start_threads()
         losses = [0.0] * -(-n // c)
         grad_chunks(net, x, D, m, loss_fn, grad, c, range(len(losses)), losses,
-                    kern.softplus_jet, kern.softplus_jet_back)
+                    kern.softplus_jet, kern.softplus_jet_back, k)
         return math.fsum(losses), grad
     workers, c = plan
     n_chunks = -(-n // c)
@@ -282,14 +292,14 @@ def value_and_grad_blas(net, x, D, m, loss_fn, grad):
     # a lock: it never runs concurrently with itself.
     lock = threading.Lock()
 
-    def locked_loss(y, JD, sl):
+    def locked_loss(*args):
         with lock:
-            return loss_fn(y, JD, sl)
+            return loss_fn(*args)
 
     def work(i):
         g = grad if i == 0 else np.zeros_like(grad)
         grad_chunks(net, x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
-                    kern.softplus_jet_serial, kern.softplus_jet_back_serial)
+                    kern.softplus_jet_serial, kern.softplus_jet_back_serial, k)
         return g
 
     for g in _parallel.run(work, workers)[1:]:
@@ -302,14 +312,23 @@ def flat(a, r):
     return a[:r].reshape(r * a.shape[1], -1)
 
 
-def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back):
+def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k=0):
     """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
 
     The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
-    kernels (threaded or serial); the tape is this call's own.
+    kernels (threaded or serial); the tape is this call's own. With k > 0 the streams include
+    the second derivatives along the pairs of the first k directions, and the backward pass
+    runs the second-order rule (:func:`~sns_np.nn._kernels.softplus_jet2_back`) instead of
+    ``act_back``.
     """
     n = x.shape[0]
-    S = 1 + m
+    S = n_streams(m, k)
+    if k:
+        serial = act_back is kern.softplus_jet_back_serial
+        back2 = kern.softplus_jet2_back_serial if serial else kern.softplus_jet2_back
+
+        def act_back(Z, sig, Abar, Zbar, m):        # noqa: F811 (the order-2 rule)
+            back2(Z, sig, Abar, Zbar, m, k)
     w, depth, o = net.width, net.depth, net.out_dim
     dt = net.dtype
     # the tape, reused for every chunk: hid[blk] is the input of block blk (hid[depth] feeds
@@ -336,22 +355,30 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back):
         Dc = None if D is None else D[lo:hi]
         # forward, keeping the tape
         first_layer(net, x[lo:hi], Dc, m, Z0[:r])
-        act(Z0[:r], Z0[:r], b0, hid[0, :r], SG0[:r], m, 0, False, net.bias)
+        act(Z0[:r], Z0[:r], b0, hid[0, :r], SG0[:r], m, k, False, net.bias)
         for blk in range(depth):
             np.matmul(flat(hid[blk], r), net.W1[blk].T, out=flat(U[blk], r))
-            act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, 0, False,
+            act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, k, False,
                 net.bias)
             np.matmul(flat(A[blk], r), net.W2[blk].T, out=flat(Zt[blk], r))
-            act(Zt[blk, :r], hid[blk, :r], b2[blk], hid[blk + 1, :r], SGZ[blk, :r], m, 0, True,
+            act(Zt[blk, :r], hid[blk, :r], b2[blk], hid[blk + 1, :r], SGZ[blk, :r], m, k, True,
                 net.bias)
+            if k:   # the forward rule adds the residual to the second-order streams on the
+                # fly; the backward rule needs the complete pre-activations on the tape
+                Zt[blk, :r, 1 + m:] += hid[blk, :r, 1 + m:]
         np.matmul(flat(hid[depth], r), net.W3.T, out=flat(Y, r))
         if net.bias:
             Y[:r, 0, :] += b3
         y = Y[:r, 0, :]
-        JD = np.swapaxes(Y[:r, 1:, :], 1, 2) if m else None
-        loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
+        JD = np.swapaxes(Y[:r, 1:1 + m, :], 1, 2) if m else None
+        if k:
+            D2D = unpack_streams(Y[:r], 2, m, k)[2]
+            loss, dy, dJD, dD2 = loss_fn(y, JD, D2D, slice(lo, hi))
+        else:
+            loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
+            dD2 = None
         losses[i] = float(loss)
-        Ybar = pack_cotangents(dy, dJD, m, r, o, dt)
+        Ybar = pack_cotangents(dy, dJD, m, r, o, dt, dD2, k)
         # backward
         Yb = Ybar.reshape(rows, o)
         gv["W3"] += Yb.T @ flat(hid[depth], r)

@@ -292,6 +292,74 @@ def softplus_jet_back_serial(Z, sig, Abar, Zbar, m):
     _softplus_jet_back_rows(Z, sig, Abar, Zbar, m, 0, Z.shape[0])
 
 
+@njit(**_SJIT)
+def _softplus_jet2_back_rows(Z, sig, Abar, Zbar, m, k, lo, hi):
+    """Reverse of the second-order jet rule (all S = 1 + m + k (k + 1) / 2 streams), points
+    lo..hi-1: the training step of a loss on second derivatives.
+
+    Z holds the complete pre-activation streams (value, first and second order); given the
+    cotangents Abar (c, S, w) of a = s(z), a_a = s'(z) z_a, a_ab = s''(z) z_a z_b + s'(z) z_ab,
+    write into Zbar (may alias Abar) the cotangents of the pre-activation streams:
+
+        zbar_ab = s'(z) abar_ab
+        zbar_a  = s'(z) abar_a + s''(z) sum_(pairs ab) abar_ab z_b      (z_a for b's)
+        zbar    = s'(z) abar + s''(z) sum_a abar_a z_a
+                  + sum_(pairs ab) abar_ab (s3(z) z_a z_b + s''(z) z_ab)
+
+    with s' = sigmoid, s'' = s' (1 - s'), s3 = s'' (1 - 2 s') the third derivative. A stored
+    pair (a, b), a < b, stands for both orders, as in the forward rule; a pair (a, a) gives
+    2 s'' abar_aa z_a.
+    """
+    w = Z.shape[2]
+    acc = np.empty(w)
+    accd = np.empty((max(m, 1), w))
+    fb_ = _flush_bar(Zbar)
+    for i in range(lo, hi):
+        acc[:] = 0.0
+        accd[:] = 0.0
+        q = 1 + m
+        for a in range(k):
+            for b in range(a, k):
+                for j in range(w):
+                    s = sig[i, j]
+                    s2 = s * (1.0 - s)
+                    g = Abar[i, q, j]
+                    za = Z[i, 1 + a, j]
+                    zb = Z[i, 1 + b, j]
+                    acc[j] += g * (s2 * (1.0 - 2.0 * s) * za * zb + s2 * Z[i, q, j])
+                    accd[a, j] += s2 * g * zb
+                    accd[b, j] += s2 * g * za
+                    d = s * g
+                    Zbar[i, q, j] = 0.0 if abs(d) < fb_ else d     # NaN kept
+                q += 1
+        for a in range(m):
+            for j in range(w):
+                s = sig[i, j]
+                g = Abar[i, 1 + a, j]
+                acc[j] += s * (1.0 - s) * g * Z[i, 1 + a, j]
+                d = s * g + accd[a, j]
+                Zbar[i, 1 + a, j] = 0.0 if abs(d) < fb_ else d
+        for j in range(w):
+            d = sig[i, j] * Abar[i, 0, j] + acc[j]
+            Zbar[i, 0, j] = 0.0 if abs(d) < fb_ else d
+
+
+@njit(**_PJIT)
+def softplus_jet2_back(Z, sig, Abar, Zbar, m, k):
+    """:func:`_softplus_jet2_back_rows` on a whole chunk, split over Numba's threads."""
+    c = Z.shape[0]
+    nblk = min(c, _NBLK)
+    for t in prange(nblk):
+        _softplus_jet2_back_rows(Z, sig, Abar, Zbar, m, k, (c * t) // nblk,
+                                 (c * (t + 1)) // nblk)
+
+
+def softplus_jet2_back_serial(Z, sig, Abar, Zbar, m, k):
+    """:func:`_softplus_jet2_back_rows` on a whole chunk in the calling thread, without the
+    GIL (a Python shim, as :func:`softplus_jet_serial`)."""
+    _softplus_jet2_back_rows(Z, sig, Abar, Zbar, m, k, 0, Z.shape[0])
+
+
 # ---------------------------------------------------------------------------------------------
 # Small networks (width <= 32): one point per iteration, every layer in registers and L1.
 # BLAS call overhead dominates at these sizes, so the whole jet is one kernel.

@@ -402,31 +402,31 @@ class ResidualMLP:
         order = check_order(order)
         x = self._check_x(x)
         n = x.shape[0]
-        d = self.in_dim
-        if directions is None:
-            if second is not None:
-                raise ValueError("second= needs directions=")
-            m = d if order >= 1 else 0
-            k = d if order == 2 else 0
-            D = None
-        else:
-            if order == 0:
-                raise ValueError("directions= needs order 1 or 2")
-            D = self._check_directions(directions, n)
-            m = D.shape[2]
-            if second is None:
-                k = m if order == 2 else 0
-            else:
-                if order != 2:
-                    raise ValueError("second= needs order=2")
-                if isinstance(second, bool) or not isinstance(second, (int, np.integer)) or \
-                        not 0 <= second <= m:
-                    raise ValueError(f"second must be an integer in [0, {m}], got {second!r}")
-                k = int(second)
+        D, m, k = self._streams(order, directions, second, n)
         Y = np.empty((n, n_streams(m, k), self.out_dim), dtype=self.dtype)
         if n:
             _engine.forward(self, x, D, m, k, Y)
         return _engine.unpack_streams(Y, order, m, k)
+
+    def _streams(self, order, directions, second, n):
+        """Checked ``(D, m, k)``: directions (or None), first-order and second-order counts."""
+        if directions is None:
+            if second is not None:
+                raise ValueError("second= needs directions=")
+            d = self.in_dim
+            return None, (d if order >= 1 else 0), (d if order == 2 else 0)
+        if order == 0:
+            raise ValueError("directions= needs order 1 or 2")
+        D = self._check_directions(directions, n)
+        m = D.shape[2]
+        if second is None:
+            return D, m, (m if order == 2 else 0)
+        if order != 2:
+            raise ValueError("second= needs order=2")
+        if isinstance(second, bool) or not isinstance(second, (int, np.integer)) or \
+                not 0 <= second <= m:
+            raise ValueError(f"second must be an integer in [0, {m}], got {second!r}")
+        return D, m, int(second)
 
     def __call__(self, x):
         """The value y (n, out_dim) at x (n, in_dim)."""
@@ -582,7 +582,7 @@ class ResidualMLP:
         check_finite(a, name)
         return a.astype(self.dtype, copy=False)
 
-    def value_and_grad(self, x, loss_fn, order=1, directions=None):
+    def value_and_grad(self, x, loss_fn, order=1, directions=None, second=None):
         """Fused forward, loss and backward pass, chunk by chunk (the training step).
 
         Parameters
@@ -596,8 +596,14 @@ class ResidualMLP:
             divide by n inside ``loss_fn``. On the data-parallel path the chunks are run by
             worker threads in no fixed order: calls never overlap (they hold a lock), but
             ``loss_fn`` must not rely on the order of the slices.
-        order : int, 0 or 1
+            At order 2 it is ``loss_fn(y, JD, D2D, sl) -> (loss, dy, dJD, dD2D)``, with the
+            second derivatives D2D (c, out_dim, k, k) as :meth:`jet` returns them and their
+            cotangent (may be None); ``D2D`` is symmetric, so only ``dD2D + dD2D^T`` counts.
+        order : int, 0, 1 or 2
         directions : (n, in_dim, m) float array, optional (default: the coordinate axes)
+        second : int, optional
+            With ``directions`` and order 2: second derivatives along the pairs of the first
+            ``second`` directions only (as in :meth:`jet`).
 
         Returns
         -------
@@ -616,8 +622,7 @@ class ResidualMLP:
         (True, True)
         """
         x = self._check_x(x)
-        order = check_order(order, (0, 1))
-        D = None if directions is None else self._check_directions(directions, x.shape[0])
-        m = 0 if order == 0 else (self.in_dim if D is None else D.shape[2])
-        return _engine.value_and_grad(self, x, D, m, loss_fn)
+        order = check_order(order)
+        D, m, k = self._streams(order, directions, second, x.shape[0])
+        return _engine.value_and_grad(self, x, D, m, loss_fn, k)
 

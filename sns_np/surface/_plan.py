@@ -10,7 +10,7 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, DETAIL_RANGE, JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from ..options import AUTO, DETAIL_RANGE, HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
@@ -91,9 +91,13 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
 
 
 #: the error for a Jacobian weight on a target without exact derivatives (a mesh)
-NO_JACOBIAN = ("jacobian_weight={:g} needs a target with exact derivatives along the sphere "
+NO_JACOBIAN = ("{}={:g} needs a target with exact derivatives along the sphere "
                "(fit_shape, an analytic map); a mesh's are those of its piecewise-linear "
                "spherical embedding, not data to match: use 0")
+
+#: the options of the losses on an analytic map's derivatives, and what they match
+DERIVATIVE_WEIGHTS = {"jacobian_weight": (JACOBIAN_WEIGHT, "derivatives"),
+                      "hessian_weight": (HESSIAN_WEIGHT, "second derivatives")}
 
 
 def _plan(target, o, net, elapsed=0.0):
@@ -109,8 +113,9 @@ def _plan(target, o, net, elapsed=0.0):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
     exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
-    if o["jacobian_weight"] and not exact:
-        raise ValueError(NO_JACOBIAN.format(o["jacobian_weight"]))
+    for name in DERIVATIVE_WEIGHTS:
+        if o[name] and not exact:
+            raise ValueError(NO_JACOBIAN.format(name, o[name]))
     if o["sampling"] is None and not cells:
         o["sampling"] = "area"
         choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "
@@ -151,12 +156,14 @@ def _plan(target, o, net, elapsed=0.0):
             "why": "an exact parametrisation (an analytic map): the position term leads"
                    if kind == "exact" else "a parametrisation through a spherical embedding: "
                    "the normals steer the fit past its tangential noise"}
-    if o["jacobian_weight"] is None:
-        o["jacobian_weight"] = JACOBIAN_WEIGHT["exact" if exact else "embedding"]
-        choices["jacobian_weight"] = {
-            "value": o["jacobian_weight"],
-            "why": "an analytic map: its derivatives along the sphere are exact data" if exact
-                   else "no exact derivatives (a mesh's are its embedding's, piecewise linear)"}
+    for name, (auto, what) in DERIVATIVE_WEIGHTS.items():
+        if o[name] is None:
+            o[name] = auto["exact" if exact else "embedding"]
+            choices[name] = {
+                "value": o[name],
+                "why": f"an analytic map: its {what} along the sphere are exact data" if exact
+                       else "no exact derivatives (a mesh's are its embedding's, piecewise "
+                            "linear)"}
     if o["steps"] is None:
         choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
                             "learning rate decays with the time elapsed"}

@@ -13,6 +13,8 @@ import hashlib
 import numpy as np
 
 from ..geometry import tangent_frame, tangent_jacobian
+from ..geometry.chart import chart_jets
+from ..protocol import surface_jet
 from ..sampling import uniform_sphere
 from .losses import normals_from_tangents
 
@@ -77,7 +79,6 @@ class _ShapeTarget:
     parametrisation = "exact"
 
     def __init__(self, shape):
-        from ..protocol import surface_jet
         from ..quadrature import sphere_quadrature
         self.shape = shape
         P, w = sphere_quadrature(96)
@@ -93,22 +94,28 @@ class _ShapeTarget:
     def sample(self, n, rng):
         return self.sample_jet(n, rng)[:3]
 
-    def sample_jet(self, n, rng):
+    def sample_jet(self, n, rng, second=False):
         """``sample``'s points with the map's derivatives along ``tangent_frame(p)`` in the
-        normalised frame, the exact data of the Jacobian loss: ``(p, q, normals, JT)``, JT
-        (n, 3, 2); one jet of the map for both."""
+        normalised frame, the exact data of the Jacobian and Hessian losses: ``(p, q,
+        normals, JT, ST)``, JT (n, 3, 2); ST (n, 3, 2, 2) the second derivatives along the
+        sphere ``S_ab = D2[e_a, e_b] - delta_ab J p`` with ``second``, else None. One jet of
+        the map for all."""
         p = uniform_sphere(n, rng)
-        return (p, *self._jet(p))
+        return (p, *self._jet(p, second))
 
     def evaluate_at(self, p):
         return self._jet(p)[:2]
 
-    def _jet(self, p):
-        from ..protocol import surface_jet
-        y, J = surface_jet(self.shape, p, 1)
-        JR = tangent_jacobian(J, tangent_frame(p))
+    def _jet(self, p, second=False):
+        R = tangent_frame(p)
+        if second:
+            y, JR, _, S2 = chart_jets(self.shape, p, R, 2)
+        else:
+            (y, J), S2 = surface_jet(self.shape, p, 1), None
+            JR = tangent_jacobian(J, R)
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
-        return (y - self.center) / self.scale, nrm, JR / self.scale
+        return ((y - self.center) / self.scale, nrm, JR / self.scale,
+                None if S2 is None else S2 / self.scale)
 
 
 def _fingerprint(V, F):

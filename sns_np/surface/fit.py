@@ -52,6 +52,7 @@ from ._checkpoint import (
 )
 from ._plan import (
     _MAX_AUTO_STEPS,
+    DERIVATIVE_WEIGHTS,
     NO_JACOBIAN,
     _ClockCosine,
     _plan,
@@ -61,7 +62,7 @@ from ._plan import (
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
 from ._targets import _MeshTarget, _ShapeTarget
-from .losses import jacobian_loss, normals_from_tangents, position_normal_loss
+from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
 __all__ = ["FitReport", "FitOptions", "fit_mesh", "fit_shape", "fit_sampler", "detail",
@@ -207,8 +208,9 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
     """
     check_choice(smooth, "smooth", set(MESH_SMOOTHING))
     _check_early(options)
-    if options.get("jacobian_weight"):          # before the embedding, not after it
-        raise ValueError(NO_JACOBIAN.format(options["jacobian_weight"]))
+    for name in DERIVATIVE_WEIGHTS:             # before the embedding, not after it
+        if options.get(name):
+            raise ValueError(NO_JACOBIAN.format(name, options[name]))
     t0 = time.perf_counter()
     target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
                          smooth=smooth)
@@ -436,7 +438,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         n_vertices = int(round(o["vertex_fraction"] * o["batch"]))
         n_faces = o["batch"] - n_vertices
         wj = o["jacobian_weight"]
-        order = 1 if (w or wj) else 0
+        wh = o["hessian_weight"]
+        order = 2 if wh else 1 if (w or wj) else 0
         ema_pos = ema_nrm = None
         stopped = "step budget"
         step = start
@@ -458,18 +461,21 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
             with signals:
                 while step < total:
                     rng_at_step = rng.bit_generator.state
-                    if wj:      # an analytic map: no sampler, no vertices (_plan)
-                        p, q, nt, JT = target.sample_jet(n_faces, rng)
+                    if wj or wh:    # an analytic map: no sampler, no vertices (_plan)
+                        p, q, nt, JT, ST = target.sample_jet(n_faces, rng, second=bool(wh))
                         wts = None
                     else:
                         p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
                     errors = None if sampler is None else np.empty(len(p))
                     R = tangent_frame(p) if order else None
+                    if wh:      # [e_u, e_v, p]: second derivatives along e_u, e_v and J p
+                        R = np.concatenate([R, p[:, :, None]], axis=2)
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
                     parts = {"position": 0.0, "normal": 0.0}
                     JTc = JT.astype(t_dtype) if wj else None
+                    STc = ST.astype(t_dtype) if wh else None
 
                     def loss_fn(y, JD, sl):
                         val, dy, dJD, pr = position_normal_loss(
@@ -486,9 +492,20 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                             errors[sl] = pr["pointwise"]
                         return val, dy, dJD
 
+                    def loss_fn2(y, JD3, D2D, sl):     # the Hessian loss's [e_u, e_v, p]
+                        val, dy, dJD = loss_fn(y, JD3[:, :, :2], sl)
+                        val_h, dD2D, dJp, _ = hessian_loss(D2D, JD3[:, :, 2], STc[sl],
+                                                           len(p), wh)
+                        dJD3 = np.zeros_like(JD3)
+                        if dJD is not None:
+                            dJD3[:, :, :2] = dJD
+                        dJD3[:, :, 2] = dJp
+                        return val + val_h, dy, dJD3, dD2D
+
                     loss, grad = net.value_and_grad(
-                        pc, loss_fn, order=order,
-                        directions=None if R is None else R.astype(t_dtype))
+                        pc, loss_fn2 if wh else loss_fn, order=order,
+                        directions=None if R is None else R.astype(t_dtype),
+                        second=2 if wh else None)
                     if not np.isfinite(loss) or not np.all(np.isfinite(grad)):
                         stopped = "diverged"
                         # the parameters are still those of the last good step: save them

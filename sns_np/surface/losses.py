@@ -19,6 +19,13 @@ Cotangents, with g = dL/dc:
 Jacobian loss (an analytic map, whose derivatives along the sphere are exact data):
 
     loss = mu 1/N sum |JD_i - T_i|^2_F,     dL/dJD = 2 mu (JD - T) / N
+
+Hessian loss (an analytic map's second derivatives along the sphere, ``S_ab = D2[e_a, e_b] -
+delta_ab J p`` of :func:`sns_np.geometry.sphere_second_derivatives`; the sphere's own
+curvature makes the radial derivative ``J p`` part of them):
+
+    loss = nu 1/N sum |S2_i - T2_i|^2_F,    dL/dD2[e_a, e_b] = G_ab = 2 nu (S2 - T2)_ab / N,
+                                            dL/d(J p) = -(G_uu + G_vv)
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ import numpy as np
 # the one normal function (geometry owns it); re-exported here and from sns_np.surface
 from ..geometry.forms import normals_from_tangents
 
-__all__ = ["jacobian_loss", "normals_from_tangents", "position_normal_loss"]
+__all__ = ["hessian_loss", "jacobian_loss", "normals_from_tangents", "position_normal_loss"]
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
@@ -141,3 +148,33 @@ def jacobian_loss(JD, JT, n_total, weight=1.0):
     E = JD - JT
     sq = float(np.einsum("kia,kia->", E, E))
     return weight * sq / n_total, (2.0 * weight / n_total) * E, sq
+
+
+def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
+    """Squared error of the second derivatives along the sphere on one chunk, and cotangents.
+
+    Parameters
+    ----------
+    D2D : (c, 3, 2, 2) float array, the network's ambient second derivatives ``D2[e_a, e_b]``
+    Jp : (c, 3) float array, its radial derivative ``J p``
+    T2 : (c, 3, 2, 2) float array, the target's ``S_ab = D2[e_a, e_b] - delta_ab J p``
+    n_total : int, the number N of points in the whole batch (the mean's denominator)
+    weight : float, nu
+
+    Returns
+    -------
+    loss : float (this chunk's contribution), dD2D : (c, 3, 2, 2) float array, dJp : (c, 3)
+    float array, sq : float (the chunk's summed squared error, unweighted)
+
+    Examples
+    --------
+    >>> D2D, T2 = np.zeros((1, 3, 2, 2)), np.zeros((1, 3, 2, 2))
+    >>> Jp = np.array([[0.0, 0.0, 1.0]])       # S_uu = S_vv = -e_z, as on the unit sphere
+    >>> loss, dD2D, dJp, sq = hessian_loss(D2D, Jp, T2, 1, weight=0.5)
+    >>> loss, sq, dJp.tolist()                  # 0.5 * 2, and -(G_uu + G_vv) = -(-1 - 1)
+    (1.0, 2.0, [[0.0, 0.0, 2.0]])
+    """
+    E = D2D - Jp[:, :, None, None] * np.eye(2, dtype=D2D.dtype) - T2
+    sq = float(np.einsum("kiab,kiab->", E, E))
+    G = (2.0 * weight / n_total) * E
+    return weight * sq / n_total, G, -(G[:, :, 0, 0] + G[:, :, 1, 1]), sq
