@@ -224,7 +224,8 @@ def fit_shape(shape, **options):
     """Fit a SphericalNeuralSurface directly to an analytic surface map (as the paper does).
 
     Sphere points are drawn uniformly; targets are ``shape(p)``, its exact normals and its
-    derivatives along the sphere (``jacobian_weight``).
+    first and second derivatives along the sphere (``jacobian_weight``,
+    ``hessian_weight``).
     Options as :func:`fit_sampler`. Returns (surface, report).
 
     Examples
@@ -260,9 +261,10 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         normals)`` in the normalised frame, and attributes ``center``, ``scale``,
         ``bbox_diagonal``, ``fingerprint``; optionally ``parametrisation``, ``"exact"``
         for an analytic map (the default normal weight depends on it; any other target is
-        treated as a mesh's ``"embedding"``), and ``sample_jet(n, rng) -> (p, q, normals,
-        JT)``, ``sample``'s points with the exact derivatives JT (n, 3, 2) along
-        ``tangent_frame(p)`` (the Jacobian loss's data)
+        treated as a mesh's ``"embedding"``), and ``sample_jet(n, rng, second=False) -> (p,
+        q, normals, JT, ST)``, ``sample``'s points with the exact derivatives JT (n, 3, 2)
+        along ``tangent_frame(p)`` (the Jacobian loss's data) and, with ``second``, the
+        second derivatives along the sphere ST (n, 3, 2, 2) (the Hessian loss's; else None)
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
@@ -298,6 +300,14 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         those the normal term already needs); 0
         for a mesh, whose derivatives are its embedding's, and any other target (a mesh
         refuses a positive weight).
+    hessian_weight : float
+        Weight of the loss on the second derivatives along the sphere, ``sum_ab |S_ab -
+        T_ab|^2`` with ``S_ab = D2S(e_a, e_b) - delta_ab dS(p)``
+        (:func:`~sns_np.surface.losses.hessian_loss`), for a target with exact derivatives.
+        Default (``HESSIAN_WEIGHT``): 1e-3 for an analytic map, where it halves the
+        curvature error again at a step that costs about twice as much (the engine's reverse
+        mode through second-order jets); 0 for any other target (a mesh refuses a positive
+        weight). Larger weights trade position for second derivatives.
     dtype : {"float32", "float64"}
         Training precision (the result is float64).
     init : {"ridge", "random"}
