@@ -10,7 +10,10 @@ For the reference network (width 256, depth 8, no biases) it prints, per dtype:
   off, as with SNS_NP_DATA_PARALLEL=0), and the speed-up over PyTorch's fastest full Hessian;
 * one training step of the reference loss at 2048 points (position MSE + 1e-4 normal error,
   gradient for all 1,050,112 parameters): time, and the speed-up over PyTorch's fastest
-  variant.
+  variant;
+* the order-2 training step of an analytic map's fit (the Hessian loss: directions
+  ``[e_u, e_v, p]``, second derivatives along ``e_u, e_v``, 7 streams): time, its products
+  alone, their ratio, and its cost relative to the order-1 step.
 
 Targets (issue 2): efficiency >= 0.80 and >= 2.5x PyTorch for the full jet; training step
 >= 1.3x PyTorch in float32 and >= 1.0x in float64. Nothing is asserted: the script prints.
@@ -36,7 +39,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import _torch_reference as tref  # noqa: E402
 
 from sns_np.nn import ResidualMLP, _engine, _parallel  # noqa: E402
-from sns_np.surface.losses import position_normal_loss  # noqa: E402
+from sns_np.surface.losses import hessian_loss, position_normal_loss  # noqa: E402
 
 
 def best_time(fn, repeats=3):
@@ -184,6 +187,26 @@ def main(argv=None):
         print(f"training step {n_train} points: {t_step * 1e3:8.1f} ms   products alone "
               f"{t_mm_train * 1e3:7.1f} ms   efficiency {t_mm_train / t_step:.2f}   "
               f"(threaded path {t_step_thr * 1e3:.1f} ms)")
+
+        # the order-2 step of the Hessian loss (fit_shape): 7 streams, the second-order rule
+        D3 = np.concatenate([R, p[:, :, None]], axis=2)
+        T2 = np.zeros((n_train, 3, 2, 2), dtype)
+
+        def step2():
+            def loss(y, JD3, D2D, sl):
+                val, dy, dJD, _ = position_normal_loss(y, JD3[:, :, :2], q[sl], nt[sl],
+                                                       n_train, 1e-4)
+                val_h, dD2D, dJp, _ = hessian_loss(D2D, JD3[:, :, 2], T2[sl], n_train, 1e-3)
+                dJD3 = np.concatenate([dJD, dJp[:, :, None]], axis=2)
+                return val + val_h, dy, dJD3, dD2D
+            return net.value_and_grad(p, loss, order=2, directions=D3, second=2)
+
+        t_step2 = best_time(step2, repeats)
+        t_mm_train2 = training_matmul_time(net, n_train, 7, dtype, repeats)
+        print(f"training step, order 2 (Hessian loss, 7 streams) {n_train} points: "
+              f"{t_step2 * 1e3:8.1f} ms   products alone {t_mm_train2 * 1e3:7.1f} ms   "
+              f"efficiency {t_mm_train2 / t_step2:.2f}   ({t_step2 / t_step:.2f}x the order-1 "
+              f"step)")
         if use_torch:
             tt = torch_times(net, x, p, R, q, nt, repeats,
                              (256,) if args.quick else (128, 256, 512))
