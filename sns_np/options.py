@@ -244,8 +244,9 @@ JACOBIAN_WEIGHT = {"embedding": 0.0, "exact": 1.0}
 #: curvature is made of them (fit_shape, 1,500 steps, with the Jacobian loss, H error at the
 #: closest point: BOBBLE 8.3% -> 4.1%, FLOWER 44% -> 17%, TREE 11.5% -> 3.8%; BOBBLE at weight
 #: 1e-4 / 1e-2 / 1e-1: 4.8%, 12.9%, 33%: larger weights cost position; docs/fitting.md, "The
-#: Hessian loss"). A step costs 2.2 times the network's work of one without it. A mesh's
-#: embedding is piecewise linear: 0.
+#: Hessian loss"). A step costs about twice as much; with the same 540 s: TREE 3.4% -> 1.75%,
+#: FLOWER 10.1% -> 6.9%, SPIKE 0.83% -> 0.57%, BOBBLE 2.6% -> 2.3%. A mesh's embedding is
+#: piecewise linear: 0.
 HESSIAN_WEIGHT = {"embedding": 0.0, "exact": 1e-3}
 
 #: checkpoint cadence of a fit (``checkpoint_every`` steps, ``checkpoint_seconds`` seconds,
