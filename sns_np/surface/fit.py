@@ -84,8 +84,8 @@ class FitReport:
     >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
-    ['detail', 'input_scale', 'jacobian_weight', 'lr', 'normal_weight', 'optimizer', 'sampling',
-     'warmup']
+    ['detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr', 'normal_weight',
+     'optimizer', 'sampling', 'warmup']
     """
 
     steps: int = 0

@@ -171,7 +171,7 @@ def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
     >>> D2D, T2 = np.zeros((1, 3, 2, 2)), np.zeros((1, 3, 2, 2))
     >>> Jp = np.array([[0.0, 0.0, 1.0]])       # S_uu = S_vv = -e_z, as on the unit sphere
     >>> loss, dD2D, dJp, sq = hessian_loss(D2D, Jp, T2, 1, weight=0.5)
-    >>> loss, sq, dJp.tolist()                  # 0.5 * 2, and -(G_uu + G_vv) = -(-1 - 1)
+    >>> loss, sq, (dJp + 0.0).tolist()          # 0.5 * 2, and -(G_uu + G_vv) = -(-1 - 1)
     (1.0, 2.0, [[0.0, 0.0, 2.0]])
     """
     E = D2D - Jp[:, :, None, None] * np.eye(2, dtype=D2D.dtype) - T2
