@@ -90,7 +90,7 @@ def detail(target, width=256, depth=8, n=4096, seed=12345):
     return float(np.sqrt((r ** 2).sum(axis=1).mean()))
 
 
-#: the error for a Jacobian weight on a target without exact derivatives (a mesh)
+#: the error for a derivative weight (Jacobian, Hessian) on a target without exact derivatives
 NO_JACOBIAN = ("{}={:g} needs a target with exact derivatives along the sphere "
                "(fit_shape, an analytic map); a mesh's are those of its piecewise-linear "
                "spherical embedding, not data to match: use 0")
