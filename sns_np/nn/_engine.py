@@ -281,7 +281,7 @@ def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0):
         kern.start_threads()
         losses = [0.0] * -(-n // c)
         grad_chunks(net, x, D, m, loss_fn, grad, c, range(len(losses)), losses,
-                    kern.softplus_jet, kern.softplus_jet_back, k)
+                    kern.softplus_jet, _back_rule(k, serial=False), k)
         return math.fsum(losses), grad
     workers, c = plan
     n_chunks = -(-n // c)
@@ -299,12 +299,21 @@ def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0):
     def work(i):
         g = grad if i == 0 else np.zeros_like(grad)
         grad_chunks(net, x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
-                    kern.softplus_jet_serial, kern.softplus_jet_back_serial, k)
+                    kern.softplus_jet_serial, _back_rule(k, serial=True), k)
         return g
 
     for g in _parallel.run(work, workers)[1:]:
         grad += g
     return math.fsum(losses), grad
+
+
+def _back_rule(k, serial):
+    """The fused backward kernel ``act_back(Z, sig, Abar, Zbar, m)``: the first-order rule,
+    or with k > 0 the second-order one (threaded or serial)."""
+    if not k:
+        return kern.softplus_jet_back_serial if serial else kern.softplus_jet_back
+    back2 = kern.softplus_jet2_back_serial if serial else kern.softplus_jet2_back
+    return lambda Z, sig, Abar, Zbar, m: back2(Z, sig, Abar, Zbar, m, k)
 
 
 def flat(a, r):
@@ -316,19 +325,12 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k
     """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
 
     The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
-    kernels (threaded or serial); the tape is this call's own. With k > 0 the streams include
-    the second derivatives along the pairs of the first k directions, and the backward pass
-    runs the second-order rule (:func:`~sns_np.nn._kernels.softplus_jet2_back`) instead of
-    ``act_back``.
+    kernels (threaded or serial; :func:`_back_rule`); the tape is this call's own. With
+    k > 0 the streams include the second derivatives along the pairs of the first k
+    directions, and ``act_back`` must be the second-order rule.
     """
     n = x.shape[0]
     S = n_streams(m, k)
-    if k:
-        serial = act_back is kern.softplus_jet_back_serial
-        back2 = kern.softplus_jet2_back_serial if serial else kern.softplus_jet2_back
-
-        def act_back(Z, sig, Abar, Zbar, m):        # noqa: F811 (the order-2 rule)
-            back2(Z, sig, Abar, Zbar, m, k)
     w, depth, o = net.width, net.depth, net.out_dim
     dt = net.dtype
     # the tape, reused for every chunk: hid[blk] is the input of block blk (hid[depth] feeds
