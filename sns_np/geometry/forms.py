@@ -65,7 +65,7 @@ def sphere_second_derivatives(D2R: np.ndarray, Jp: np.ndarray) -> np.ndarray:
     array([[-1.,  0.],
            [ 0., -1.]])
     """
-    return D2R - Jp[:, :, None, None] * _EYE2
+    return D2R - Jp[:, :, None, None] * _EYE2.astype(D2R.dtype, copy=False)  # float32 stays
 
 
 def frame_jets(J: np.ndarray, D2: np.ndarray, R: np.ndarray, p: np.ndarray):

@@ -83,7 +83,7 @@ class _ShapeTarget:
         self.shape = shape
         P, w = sphere_quadrature(96)
         y, J = surface_jet(shape, P, 1)
-        JR = np.einsum("kia,kab->kib", J, tangent_frame(P))
+        JR = tangent_jacobian(J, tangent_frame(P))
         dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1) * w
         self.area = float(dA.sum())
         self.center = (dA[:, None] * y).sum(axis=0) / self.area
@@ -111,8 +111,7 @@ class _ShapeTarget:
         if second:
             y, JR, _, S2 = chart_jets(self.shape, p, R, 2)
         else:
-            (y, J), S2 = surface_jet(self.shape, p, 1), None
-            JR = tangent_jacobian(J, R)
+            (y, JR), S2 = chart_jets(self.shape, p, R, 1), None
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
         return ((y - self.center) / self.scale, nrm, JR / self.scale,
                 None if S2 is None else S2 / self.scale)

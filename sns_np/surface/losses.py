@@ -33,7 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 # the one normal function (geometry owns it); re-exported here and from sns_np.surface
-from ..geometry.forms import normals_from_tangents
+from ..geometry.forms import normals_from_tangents, sphere_second_derivatives
 
 __all__ = ["hessian_loss", "jacobian_loss", "normals_from_tangents", "position_normal_loss"]
 
@@ -174,7 +174,7 @@ def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
     >>> loss, sq, (dJp + 0.0).tolist()          # 0.5 * 2, and -(G_uu + G_vv) = -(-1 - 1)
     (1.0, 2.0, [[0.0, 0.0, 2.0]])
     """
-    E = D2D - Jp[:, :, None, None] * np.eye(2, dtype=D2D.dtype) - T2
+    E = sphere_second_derivatives(D2D, Jp) - T2
     sq = float(np.einsum("kiab,kiab->", E, E))
     G = (2.0 * weight / n_total) * E
     return weight * sq / n_total, G, -(G[:, :, 0, 0] + G[:, :, 1, 1]), sq
