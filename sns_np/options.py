@@ -214,9 +214,9 @@ DETAIL_RANGE = (5e-3, 2e-2)
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
-               "batch": 2048, "sampling": "area", "optimizer": "adam"},
+               "batch": 2048, "sampling": "area", "optimizer": "adam", "width": 256},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512, "sampling": "error", "optimizer": "soap"},
+                 "batch": 512, "sampling": "error", "optimizer": "soap", "width": 128},
 }
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
@@ -294,7 +294,8 @@ class FitOptions(Options):
 
     _unknown = "unknown fitting option(s) {names}"
 
-    width: int = option(256, "network width", Int(1), resume=True)
+    width: int | None = option(None, f"network width of a fresh network (default: "
+                               f"{_auto('width')})", Int(1), resume=True)
     depth: int = option(8, "residual blocks of a fresh network", Int(0), resume=True)
     steps: int | None = option(
         None, "step budget (default: as many as fit the time budget, with the learning rate "
@@ -515,7 +516,7 @@ def add_arguments(parser, options, names, flags=None):
     >>> args = p.parse_args(["--width", "64"])
     >>> args.width, args.time_budget, given_arguments(args, ["width", "time_budget"])
     (64, None, {'width': 64})
-    >>> "network width (default: 256)" in " ".join(p.format_help().split())
+    >>> "256 for a smooth target, 128 for a detailed one" in " ".join(p.format_help().split())
     True
     """
     flags = flags or {}

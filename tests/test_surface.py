@@ -333,22 +333,25 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
     assert smooth < 5e-3 < 2e-2 < bumpy
     opts = dict(TINY, steps=3)
-    del opts["input_scale"], opts["lr"], opts["batch"]
+    del opts["input_scale"], opts["lr"], opts["batch"], opts["width"]
     S, r = fit_shape(Bobble(), **opts)
+    assert r.options["width"] == AUTO["detailed"]["width"] == 128
+    assert S.net.width == 128
     assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
-                              "optimizer", "jacobian_weight", "hessian_weight"}
+                              "optimizer", "width", "jacobian_weight", "hessian_weight"}
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
+    # a budget too short for the goals says so
+    assert any("too short" in n for n in r.notes) and "too short" in r.summary()
     S, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
     assert r.options["input_scale"] == AUTO["smooth"]["input_scale"]
     assert r.options["batch"] == AUTO["smooth"]["batch"] == 2048
     assert r.options["optimizer"] == "adam"
-    # a budget too short for the goals says so
-    assert any("too short" in n for n in r.notes) and "too short" in r.summary()
+    assert r.options["width"] == AUTO["smooth"]["width"] == S.net.width == 256
 
 
 def test_options_refused_before_any_work():

@@ -121,12 +121,15 @@ def _plan(target, o, net, elapsed=0.0):
         choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "
                                "analytic map): no mesh faces to weight by their error"}
     if net is not None:
-        # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured
+        # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured;
+        # the network's own width
         for k in ("lr", "warmup", "batch", "sampling", "optimizer"):
             if o[k] is None:
                 o[k] = AUTO["smooth"][k]
-    todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer")
-            if o[k] is None and net is None]
+        if o["width"] is None:
+            o["width"] = net.width
+    todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer",
+                        "width") if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
@@ -141,6 +144,8 @@ def _plan(target, o, net, elapsed=0.0):
                 v = max(v - elapsed, 10.0)
             elif k in ("warmup", "batch"):
                 v = int(round(v))
+            elif k == "width":          # a multiple of 16, as the products like it
+                v = int(16 * round(v / 16))
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
@@ -174,8 +179,9 @@ def _probe_step_time(o, repeats=2):
     """Seconds per training step of the options' (FitOptions) network and batch, measured on
     this machine (a fresh network, random points: about a second)."""
     g = np.random.default_rng(0)
-    net = ResidualMLP(width=o.width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
-    # an automatic batch is not known yet: the smallest it can be (lenient)
+    # an automatic width or batch is not known yet: the smallest it can be (lenient)
+    width = o.width or min(end["width"] for end in AUTO.values())
+    net = ResidualMLP(width=width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
     batch = o.batch or min(end["batch"] for end in AUTO.values())
     p = uniform_sphere(batch, g)
     pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)

@@ -268,7 +268,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     net : ResidualMLP, optional
         Start from this network (fine-tuning; e.g. flows) instead of a fresh one.
     width, depth : int
-        Architecture of a fresh network (by default the reference's).
+        Architecture of a fresh network. Depth: the reference's 8 blocks. Width: chosen
+        from the target's :func:`detail`, the reference's 256 for a smooth target and 128
+        for a detailed one: a quarter of the products per step, so about four times the
+        steps in the same time, and detail is limited by the steps, not by the width
+        (docs/fitting.md, "The network's width"). A warm start ``net`` keeps its own.
     steps : int, optional
         Step budget. Default: as many steps as fit in ``time_budget``, with the cosine decay
         running on the clock (over the fraction of the budget elapsed).
