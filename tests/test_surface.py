@@ -354,6 +354,25 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["width"] == AUTO["smooth"]["width"] == S.net.width == 256
 
 
+def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
+    from sns_np.options import DETAIL_RANGE, FitOptions
+    from sns_np.surface import _plan as plan
+    from sns_np.surface.fit import _ShapeTarget
+    target = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
+    # a detail half way (on a log scale) between smooth and detailed
+    monkeypatch.setattr(plan, "detail", lambda t: float(np.sqrt(np.prod(DETAIL_RANGE))))
+    o = FitOptions().to_dict()
+    choices = plan._plan(target, o, None)
+    # sqrt(256 * 128) = 181, rounded to a multiple of 16
+    assert o["width"] == choices["width"]["value"] == 176
+    assert "between (0.50)" in choices["width"]["why"]
+    o = FitOptions().to_dict()
+    plan._plan(target, o, ResidualMLP(width=24, depth=1, seed=0))
+    assert o["width"] == 24
+    o = FitOptions(width=40).to_dict()          # given: never overridden
+    assert "width" not in plan._plan(target, o, None) and o["width"] == 40
+
+
 def test_options_refused_before_any_work():
     E = Ellipsoid(1.0, 1.3, 0.7)
     V, F = E.mesh(1)
