@@ -221,7 +221,7 @@ def test_normal_weight_follows_the_parametrisation():
     # a target of fit_sampler that does not say "exact" is parametrised like a mesh
     from sns_np.options import FitOptions
     from sns_np.surface._plan import _plan
-    o = FitOptions(steps=1, batch=8, lr=1e-3, warmup=0, input_scale=4.0,
+    o = FitOptions(steps=1, width=16, batch=8, lr=1e-3, warmup=0, input_scale=4.0,
                    optimizer="adam").to_dict()
     unknown = type("Target", (), {"parametrisation": "something else"})()
     _plan(unknown, o, net=None)
