@@ -30,7 +30,7 @@ from .._validation import (
     check_choice,
 )
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
-from ..geometry import tangent_frame
+from ..geometry import tangent_frame, tangent_jacobian
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import make_optimizer
 from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constants, re-exported)
@@ -672,7 +672,7 @@ def _evaluate(surface, target, n_eval):
     q, nt = target.evaluate_at(p)
     q = target.center + target.scale * q
     y, J = surface.jet(p, 1)
-    JR = np.einsum("kia,kab->kib", J, tangent_frame(p))
+    JR = tangent_jacobian(J, tangent_frame(p))
     n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
     err = np.linalg.norm(y - q, axis=1)
     ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nt), -1.0, 1.0)))
