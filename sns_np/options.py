@@ -37,7 +37,7 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
-           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "HESSIAN_WEIGHT", "CLOSEST_LR_RATIO", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
@@ -214,10 +214,16 @@ DETAIL_RANGE = (5e-3, 2e-2)
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
-               "batch": 2048, "sampling": "area", "optimizer": "adam", "width": 256},
+               "batch": 2048, "sampling": "area", "optimizer": "adam", "width": 256,
+               "closest_after": 1.0},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
-                 "batch": 512, "sampling": "error", "optimizer": "soap", "width": 128},
+                 "batch": 512, "sampling": "error", "optimizer": "soap", "width": 128,
+                 "closest_after": 0.5},
 }
+
+#: the nearest-point phase of a mesh fit (``closest_after``) restarts the cosine decay from
+#: ``lr`` times this
+CLOSEST_LR_RATIO = 0.05
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
 #: with importance weights (a mesh only; ``sns_np.surface._adaptive``)
@@ -343,6 +349,20 @@ class FitOptions(Options):
         f"{_auto('input_scale')}, interpolated in between)", Real(), resume=True)
     tangent_weight: float = option(1.0, "weight of the tangential part of the position error",
                                    Real(), resume=True)
+    closest_after: float | None = option(
+        None, f"fraction of the fit after which positions and normals are compared at the "
+        f"mesh point nearest each network point, not at the embedding's correspondence (1: "
+        f"never; a mesh only; default: {_auto('closest_after')})", Fraction(), resume=True)
+    closest_lr: float | None = option(
+        None, "peak learning rate of the nearest-point phase, which decays again from it "
+        "(default: lr x 0.05)", Real(), resume=True)
+    closest_normal_weight: float = option(
+        0.01, "weight of the normal loss while targets are the nearest mesh points",
+        Real(allow_zero=True), resume=True)
+    anchor_weight: float = option(
+        1.0, "weight of the correspondence's position error while targets are the nearest "
+        "mesh points (it keeps the parametrisation from drifting)", Real(allow_zero=True),
+        resume=True)
     readout_every: int = option(0, "refit the output layer every this many steps (0: never)",
                                 Int(0), resume=True)
     readout: str = option("gn", "how the output layer is refitted: Levenberg-Marquardt on the "

@@ -342,7 +342,9 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
-                              "optimizer", "width", "jacobian_weight", "hessian_weight"}
+                              "optimizer", "width", "jacobian_weight", "hessian_weight",
+                              "closest_after"}
+    assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     # a budget too short for the goals says so
@@ -396,3 +398,42 @@ def test_bad_options():
         SphericalNeuralSurface(ResidualMLP(width=4, depth=1), scale=-1)
     with pytest.raises(ValueError, match="R\\^3 -> R\\^3"):
         SphericalNeuralSurface(ResidualMLP(out_dim=1, width=4, depth=1))
+
+
+def test_closest_targets_sit_at_the_nearest_mesh_point_and_give_its_distance_gradient():
+    """Targets at the nearest mesh point: a point of the mesh is its own target, and the
+    position loss's cotangent 2 (y - c(y)) / N is the gradient of the squared distance."""
+    from sns_np.mesh import spherical_embedding
+    from sns_np.surface._targets import _MeshTarget
+    from sns_np.surface.losses import position_normal_loss
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    V = V * (1.0 + 0.1 * np.random.default_rng(0).random(len(V)))[:, None]
+    Vs = spherical_embedding(V, F)[0]
+    T = _MeshTarget(V, F, Vs=Vs, smooth="none")
+    p, q, nt = T.sample(200, np.random.default_rng(1))
+    qc, nc = T.closest(q)
+    assert np.allclose(qc, q, atol=1e-12) and np.allclose(nc, nt, atol=1e-9)
+    y = q + 0.02 * np.random.default_rng(2).standard_normal(q.shape)
+    qc, _ = T.closest(y)
+    _, dy, _, _ = position_normal_loss(y, None, qc, None, len(y), 0.0)
+
+    def sq_distance(Y):
+        return float(((Y - T.closest(Y)[0]) ** 2).sum()) / len(Y)
+    h = 1e-6
+    for i, k in ((0, 0), (7, 1), (31, 2)):
+        e = np.zeros_like(y)
+        e[i, k] = h
+        fd = (sq_distance(y + e) - sq_distance(y - e)) / (2 * h)
+        assert np.isclose(dy[i, k], fd, rtol=1e-5, atol=1e-9)
+
+
+def test_closest_phase_is_a_mesh_option_and_is_recorded():
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    with pytest.raises(ValueError, match="closest_after=0.5 needs a mesh target"):
+        fit_shape(E, closest_after=0.5, **TINY)
+    with pytest.raises(ValueError, match=r"closest_after must lie in \[0, 1\]"):
+        fit_mesh(*E.mesh(1), closest_after=2.0, Vs="not an embedding")
+    V, F = E.mesh(2)
+    S, r = fit_mesh(V, F, steps=6, closest_after=0.5, **TINY)
+    assert r.options["closest_after"] == 0.5 and np.isfinite(r.final_loss)
+    assert r.distance_relative < 0.5 and r.closest_normal_mean_deg < 90.0

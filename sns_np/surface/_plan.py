@@ -10,25 +10,35 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, DETAIL_RANGE, HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from ..options import AUTO, CLOSEST_LR_RATIO, DETAIL_RANGE, HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
 _MAX_AUTO_STEPS = 1_000_000
 
 
-class _ClockCosine:
-    """A cosine schedule on the clock: the warm-up of ``base`` over its first steps, then the
-    decay from ``lr`` to ``lr_min`` over the fraction of ``budget`` seconds elapsed."""
+class _PhasedCosine:
+    """The cosine schedule of ``base`` on a fraction of the fit (of the clock's budget, or of
+    the steps): the warm-up over the first steps, the decay from ``lr`` to ``lr_min`` over
+    ``[0, split]``, then (``lr2`` given) a second decay from ``lr2`` to ``lr_min`` over
+    ``[split, 1]``, the phase whose targets are the nearest mesh points."""
 
-    kind = "cosine-clock"
+    kind = "cosine-phased"
 
-    def __init__(self, base, clock, budget):
-        self.base, self.clock, self.budget = base, clock, float(budget)
+    def __init__(self, base, fraction, split=1.0, lr2=None):
+        self.base, self.fraction = base, fraction
+        self.split, self.lr2 = float(split), lr2
 
     def __call__(self, t):
         b = self.base
-        lr = b.cosine_at(min(self.clock() / self.budget, 1.0))
+        f = min(max(self.fraction(t), 0.0), 1.0)
+        if self.lr2 is None or self.split >= 1.0:
+            lr = b.cosine_at(f)
+        elif f < self.split:
+            lr = b.cosine_at(f / self.split)
+        else:
+            g = (f - self.split) / (1.0 - self.split)
+            lr = b.lr_min + 0.5 * (self.lr2 - b.lr_min) * (1.0 + np.cos(np.pi * g))
         if b.warmup and t < b.warmup:
             lr *= (t + 1) / b.warmup
         return float(lr)
@@ -42,6 +52,14 @@ _OPTIMIZER_WHY = {
 _SAMPLING_WHY = {
     "area": ": uniform by area (the error is spread evenly)",
     "error": ": more samples where the recent error is, weighted back to the same loss"}
+
+
+def _closest_why(v):
+    if v >= 1.0:
+        return ": the embedding's correspondence throughout (a smooth mesh needs no more)"
+    return (f": the embedding's correspondence for the first {v:.0%} of the fit, then the "
+            f"nearest mesh points (the surface need not follow the embedding's piecewise-"
+            f"linear parametrisation, docs/fitting.md)")
 
 
 def _auto_values(d):
@@ -112,6 +130,16 @@ def _plan(target, o, net, elapsed=0.0):
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
+    nearest = hasattr(target, "closest")      # targets at the nearest mesh point
+    if o["closest_after"] is not None and o["closest_after"] < 1.0 and not nearest:
+        raise ValueError(f"closest_after={o['closest_after']:g} needs a mesh target "
+                         f"(fit_mesh), whose nearest points are the targets; this target is "
+                         f"matched through its parametrisation: use 1")
+    if o["closest_after"] is None and (not nearest or net is not None):
+        o["closest_after"] = 1.0
+        choices["closest_after"] = {
+            "value": 1.0, "why": "a warm start: the targets stay those of the "
+            "parametrisation" if nearest else "no mesh: the targets are the map's own"}
     exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
     for name in DERIVATIVE_WEIGHTS:
         if o[name] and not exact:
@@ -129,7 +157,7 @@ def _plan(target, o, net, elapsed=0.0):
         if o["width"] is None:
             o["width"] = net.width
     todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer",
-                        "width") if o[k] is None and net is None]
+                        "width", "closest_after") if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
@@ -151,6 +179,7 @@ def _plan(target, o, net, elapsed=0.0):
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")
+                          + (_closest_why(v) if k == "closest_after" else "")
                           + (_OPTIMIZER_WHY[v] if k == "optimizer" else "")}
     if o["normal_weight"] is None:
         # "exact" for an analytic map; anything else is parametrised like a mesh
@@ -169,6 +198,12 @@ def _plan(target, o, net, elapsed=0.0):
                 "why": f"an analytic map: its {what} along the sphere are exact data" if exact
                        else "no exact derivatives (a mesh's are its embedding's, piecewise "
                             "linear)"}
+    if o["closest_lr"] is None and o["closest_after"] < 1.0:
+        o["closest_lr"] = o["lr"] * CLOSEST_LR_RATIO
+        choices["closest_lr"] = {
+            "value": o["closest_lr"],
+            "why": f"lr x {CLOSEST_LR_RATIO:g}: the nearest-point phase refines a surface "
+                   f"that is already close (docs/fitting.md)"}
     if o["steps"] is None:
         choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
                             "learning rate decays with the time elapsed"}

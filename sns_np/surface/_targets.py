@@ -43,6 +43,7 @@ class _MeshTarget:
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
         self.smooth = smooth
+        self._nearest = None            # the ClosestPoint search, built on first use
 
     def _targets(self, face, beta):
         q, nrm = self.corr.to_mesh(face, beta)
@@ -71,6 +72,22 @@ class _MeshTarget:
 
     def evaluate_at(self, p):
         return self._targets(*self.corr.locate(p))
+
+    @property
+    def nearest(self):
+        """The :class:`~sns_np.mesh.closest.ClosestPoint` search of the mesh, built on first
+        use (build it before handing ``closest`` to several threads)."""
+        if self._nearest is None:
+            from ..mesh.closest import ClosestPoint
+            self._nearest = ClosestPoint(self.corr.V, self.corr.F)
+        return self._nearest
+
+    def closest(self, y):
+        """Targets at the mesh point nearest each point ``y`` (n, 3) of the normalised frame:
+        ``(q, normals)``, like ``sample``'s but independent of the parametrisation."""
+        face, beta, _ = self.nearest.query(self.center + self.scale * np.asarray(
+            y, dtype=np.float64), exact=False)
+        return self._targets(face, beta)
 
 
 class _ShapeTarget:

@@ -54,7 +54,7 @@ from ._plan import (
     _MAX_AUTO_STEPS,
     DERIVATIVE_WEIGHTS,
     NO_JACOBIAN,
-    _ClockCosine,
+    _PhasedCosine,
     _plan,
     _probe_step_time,
     _schedule,
@@ -100,6 +100,10 @@ class FitReport:
     #: held-out angle between the surface normal and the target normal, degrees
     normal_mean_deg: float = float("nan")
     normal_max_deg: float = float("nan")
+    #: a mesh only, independent of the parametrisation: held-out mean distance from the
+    #: surface to the mesh, and angle to the mesh's interpolated normal at the nearest point
+    distance_mean: float = float("nan")
+    closest_normal_mean_deg: float = float("nan")
     history: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     #: what the options left to "auto" became, and why (option -> {"value", "why"})
@@ -107,8 +111,9 @@ class FitReport:
     #: plain-language remarks on the result (for instance a budget too short for the goals)
     notes: list = field(default_factory=list)
 
-    #: fidelity goals (held-out, against the target): normal angle in degrees and the mean
-    #: position error relative to the bounding-box diagonal
+    #: fidelity goals (held-out): normal angle in degrees and mean distance relative to the
+    #: bounding-box diagonal; for a mesh against the mesh at the nearest point, for an
+    #: analytic map against the map
     GOALS = {"normal_mean_deg": 1.5, "position_relative": 1e-3}
 
     def add_quality_notes(self):
@@ -121,12 +126,18 @@ class FitReport:
         >>> r.notes[0][:50]
         'the step budget (10 steps, 1 s) was too short to r'
         """
+        # a mesh's goals are geometric (the surface against the mesh, whatever the
+        # parametrisation); an analytic map's are against the map
+        mesh = np.isfinite(self.distance_mean)
+        normal = self.closest_normal_mean_deg if mesh else self.normal_mean_deg
+        position = self.distance_relative if mesh else self.position_relative
+        what = ("normal error at the nearest mesh point", "distance to the mesh") if mesh \
+            else ("normal error", "position error")
         missed = []
-        if self.normal_mean_deg > self.GOALS["normal_mean_deg"]:
-            missed.append(f"normal error {self.normal_mean_deg:.2f} deg > "
-                          f"{self.GOALS['normal_mean_deg']} deg")
-        if self.position_relative > self.GOALS["position_relative"]:
-            missed.append(f"position error {self.position_relative:.2e} > "
+        if normal > self.GOALS["normal_mean_deg"]:
+            missed.append(f"{what[0]} {normal:.2f} deg > {self.GOALS['normal_mean_deg']} deg")
+        if position > self.GOALS["position_relative"]:
+            missed.append(f"{what[1]} {position:.2e} > "
                           f"{self.GOALS['position_relative']:g} of the diagonal")
         if missed and self.stopped in ("step budget", "time budget"):
             self.notes.append(f"the {self.stopped} ({self.steps} steps, {self.seconds:.0f} s) "
@@ -137,6 +148,10 @@ class FitReport:
     @property
     def position_relative(self) -> float:
         return self.position_mean / self.bbox_diagonal
+
+    @property
+    def distance_relative(self) -> float:
+        return self.distance_mean / self.bbox_diagonal
 
     def summary(self) -> str:
         """The report in a few lines: steps, time, held-out errors and notes.
@@ -153,7 +168,11 @@ class FitReport:
                 f"position error mean {self.position_mean:.3g} (= {self.position_relative:.2e}"
                 f" of the bbox diagonal), RMS {self.position_rms:.3g}, max "
                 f"{self.position_max:.3g}; normal error mean {self.normal_mean_deg:.3f} deg, max "
-                f"{self.normal_max_deg:.2f} deg" + "".join(f"\nnote: {n}" for n in self.notes))
+                f"{self.normal_max_deg:.2f} deg"
+                + (f"; against the mesh: distance {self.distance_relative:.2e} of the bbox "
+                   f"diagonal, normal error {self.closest_normal_mean_deg:.3f} deg at the "
+                   f"nearest point" if np.isfinite(self.distance_mean) else "")
+                + "".join(f"\nnote: {n}" for n in self.notes))
 
     def to_json(self) -> dict:
         """The report as a JSON-serialisable dict (kept in the model's metadata).
@@ -168,6 +187,7 @@ class FitReport:
         d = asdict(self)
         d["history"] = {k: list(map(float, v)) for k, v in self.history.items()}
         d["position_relative"] = self.position_relative
+        d["distance_relative"] = self.distance_relative
         return d
 
 
@@ -440,12 +460,15 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         if sampler is not None and state is not None:
             sampler.load_state_dict(state["sampler"])
 
-        # with no step count the schedule runs on the clock: its decay ends with the budget
+        # with no step count the schedule runs on the clock: its decay ends with the budget;
+        # a nearest-point phase decays again from its own rate
         auto_steps = o["steps"] is None
         total = o["steps"] if not auto_steps else _MAX_AUTO_STEPS
-        if auto_steps and o["schedule"] == "cosine":
-            opt.schedule = _ClockCosine(opt.schedule, lambda: time.perf_counter() - t0,
-                                        o["time_budget"])
+        closest = o["closest_after"] < 1.0
+        if o["schedule"] == "cosine" and (auto_steps or closest):
+            opt.schedule = _PhasedCosine(
+                opt.schedule, lambda t: _fraction_done(t, total, t0, o), o["closest_after"],
+                o["closest_lr"] if closest else None)
         bar = Progress(total if not auto_steps else 1, "fit", enabled=progress)
         t0 = time.perf_counter() - elapsed0
         w = o["normal_weight"]
@@ -455,6 +478,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         wj = o["jacobian_weight"]
         wh = o["hessian_weight"]
         order = 2 if wh else 1 if (w or wj) else 0
+        if closest:
+            target.nearest          # built here, not by the engine's threads at once
         ema_pos = ema_nrm = None
         stopped = "step budget"
         step = start
@@ -492,11 +517,25 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     JTc = JT.astype(t_dtype) if wj else None
                     STc = ST.astype(t_dtype) if wh else None
 
+                    near = closest and _fraction_done(step, total, t0, o) >= o["closest_after"]
+
                     def loss_fn(y, JD, sl):
-                        val, dy, dJD, pr = position_normal_loss(
-                            y, JD, qc[sl], ntc[sl], len(p), w, tangent_weight=tw,
-                            sample_weight=None if wc is None else wc[sl],
-                            pointwise=errors is not None)
+                        sw = None if wc is None else wc[sl]
+                        if near:    # the targets at the mesh points nearest y, anchored
+                            qn, nn = (a.astype(t_dtype) for a in target.closest(y))
+                            val, dy, dJD, pr = position_normal_loss(
+                                y, JD, qn, nn, len(p), o["closest_normal_weight"],
+                                sample_weight=sw,
+                                pointwise=errors is not None)
+                            if o["anchor_weight"]:
+                                va, dya, _, _ = position_normal_loss(
+                                    y, None, qc[sl], None, len(p), 0.0, sample_weight=sw)
+                                val += o["anchor_weight"] * va
+                                dy += o["anchor_weight"] * dya
+                        else:
+                            val, dy, dJD, pr = position_normal_loss(
+                                y, JD, qc[sl], ntc[sl], len(p), w, tangent_weight=tw,
+                                sample_weight=sw, pointwise=errors is not None)
                         if wj:
                             val_j, dJD_j, _ = jacobian_loss(JD, JTc[sl], len(p), wj)
                             val += val_j
@@ -624,6 +663,13 @@ _PASSED = ("net", "checkpoint", "checkpoint_every", "checkpoint_seconds", "resum
            "callback", "history_every", "source")
 
 
+def _fraction_done(step, total, t0, o):
+    """The fraction of the fit done: of the steps, or of the time budget on the clock."""
+    if o["steps"] is not None:
+        return step / total
+    return (time.perf_counter() - t0) / o["time_budget"]
+
+
 def _draw(target, sampler, n_faces, n_vertices, rng):
     """One batch: ``n_faces`` points on the faces (by ``sampler`` if any: drawn where the
     error is, weighted back to the same loss), then ``n_vertices`` vertices (weight 1).
@@ -675,8 +721,18 @@ def _evaluate(surface, target, n_eval):
     JR = tangent_jacobian(J, tangent_frame(p))
     n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
     err = np.linalg.norm(y - q, axis=1)
-    ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nt), -1.0, 1.0)))
-    return FitReport(position_mean=float(err.mean()), position_rms=float(np.sqrt((err ** 2)
-                     .mean())), position_max=float(err.max()),
-                     bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(ang.mean()),
-                     normal_max_deg=float(ang.max()))
+    report = FitReport(position_mean=float(err.mean()), position_rms=float(np.sqrt((err ** 2)
+                       .mean())), position_max=float(err.max()),
+                       bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(_angle(n, nt)
+                       .mean()), normal_max_deg=float(_angle(n, nt).max()))
+    if hasattr(target, "nearest"):      # a mesh: the geometry, whatever the parametrisation
+        face, beta, d = target.nearest.query(y)
+        report.distance_mean = float(d.mean())
+        report.closest_normal_mean_deg = float(_angle(n, target.corr.to_mesh(face, beta)[1])
+                                               .mean())
+    return report
+
+
+def _angle(a, b):
+    """Angles (degrees) between the rows of two arrays of unit vectors."""
+    return np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0)))
