@@ -81,7 +81,7 @@ def fit_options(args):
     keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "input_scale",
             "normal_weight", "smooth", "sampling", "optimizer", "vertex_fraction",
             "jacobian_weight", "hessian_weight", "closest_after", "anchor_weight",
-            "closest_normal_weight", "closest_lr")
+            "closest_normal_weight")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -330,7 +330,7 @@ def main(argv=None):
                       ("normal-weight", float), ("vertex-fraction", float),
                       ("jacobian-weight", float), ("hessian-weight", float),
                       ("closest-after", float), ("anchor-weight", float),
-                      ("closest-normal-weight", float), ("closest-lr", float)):
+                      ("closest-normal-weight", float)):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])

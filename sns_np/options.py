@@ -37,7 +37,7 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
-           "HESSIAN_WEIGHT", "CLOSEST_LR_RATIO", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
@@ -218,12 +218,8 @@ AUTO = {
                "closest_after": 1.0},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
                  "batch": 512, "sampling": "error", "optimizer": "soap", "width": 128,
-                 "closest_after": 0.5},
+                 "closest_after": 0.2},
 }
-
-#: the nearest-point phase of a mesh fit (``closest_after``) restarts the cosine decay from
-#: ``lr`` times this
-CLOSEST_LR_RATIO = 0.05
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
 #: with importance weights (a mesh only; ``sns_np.surface._adaptive``)
@@ -353,9 +349,6 @@ class FitOptions(Options):
         None, f"fraction of the fit after which positions and normals are compared at the "
         f"mesh point nearest each network point, not at the embedding's correspondence (1: "
         f"never; a mesh only; default: {_auto('closest_after')})", Fraction(), resume=True)
-    closest_lr: float | None = option(
-        None, "peak learning rate of the nearest-point phase, which decays again from it "
-        "(default: lr x 0.05)", Real(), resume=True)
     closest_normal_weight: float = option(
         0.01, "weight of the normal loss while targets are the nearest mesh points",
         Real(allow_zero=True), resume=True)

@@ -10,35 +10,31 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, CLOSEST_LR_RATIO, DETAIL_RANGE, HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from ..options import (
+    AUTO,
+        DETAIL_RANGE,
+    HESSIAN_WEIGHT,
+    JACOBIAN_WEIGHT,
+    NORMAL_WEIGHT,
+)
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
 _MAX_AUTO_STEPS = 1_000_000
 
 
-class _PhasedCosine:
-    """The cosine schedule of ``base`` on a fraction of the fit (of the clock's budget, or of
-    the steps): the warm-up over the first steps, the decay from ``lr`` to ``lr_min`` over
-    ``[0, split]``, then (``lr2`` given) a second decay from ``lr2`` to ``lr_min`` over
-    ``[split, 1]``, the phase whose targets are the nearest mesh points."""
+class _ClockCosine:
+    """A cosine schedule on the clock: the warm-up of ``base`` over its first steps, then the
+    decay from ``lr`` to ``lr_min`` over the fraction of ``budget`` seconds elapsed."""
 
-    kind = "cosine-phased"
+    kind = "cosine-clock"
 
-    def __init__(self, base, fraction, split=1.0, lr2=None):
-        self.base, self.fraction = base, fraction
-        self.split, self.lr2 = float(split), lr2
+    def __init__(self, base, clock, budget):
+        self.base, self.clock, self.budget = base, clock, float(budget)
 
     def __call__(self, t):
         b = self.base
-        f = min(max(self.fraction(t), 0.0), 1.0)
-        if self.lr2 is None or self.split >= 1.0:
-            lr = b.cosine_at(f)
-        elif f < self.split:
-            lr = b.cosine_at(f / self.split)
-        else:
-            g = (f - self.split) / (1.0 - self.split)
-            lr = b.lr_min + 0.5 * (self.lr2 - b.lr_min) * (1.0 + np.cos(np.pi * g))
+        lr = b.cosine_at(min(self.clock() / self.budget, 1.0))
         if b.warmup and t < b.warmup:
             lr *= (t + 1) / b.warmup
         return float(lr)
@@ -198,12 +194,6 @@ def _plan(target, o, net, elapsed=0.0):
                 "why": f"an analytic map: its {what} along the sphere are exact data" if exact
                        else "no exact derivatives (a mesh's are its embedding's, piecewise "
                             "linear)"}
-    if o["closest_lr"] is None and o["closest_after"] < 1.0:
-        o["closest_lr"] = o["lr"] * CLOSEST_LR_RATIO
-        choices["closest_lr"] = {
-            "value": o["closest_lr"],
-            "why": f"lr x {CLOSEST_LR_RATIO:g}: the nearest-point phase refines a surface "
-                   f"that is already close (docs/fitting.md)"}
     if o["steps"] is None:
         choices["steps"] = {"value": None, "why": "as many as fit in the time budget; the "
                             "learning rate decays with the time elapsed"}

@@ -73,7 +73,6 @@ class _MeshTarget:
     def evaluate_at(self, p):
         return self._targets(*self.corr.locate(p))
 
-    @property
     def nearest(self):
         """The :class:`~sns_np.mesh.closest.ClosestPoint` search of the mesh, built on first
         use (build it before handing ``closest`` to several threads)."""
@@ -85,7 +84,7 @@ class _MeshTarget:
     def closest(self, y):
         """Targets at the mesh point nearest each point ``y`` (n, 3) of the normalised frame:
         ``(q, normals)``, like ``sample``'s but independent of the parametrisation."""
-        face, beta, _ = self.nearest.query(self.center + self.scale * np.asarray(
+        face, beta, _ = self.nearest().query(self.center + self.scale * np.asarray(
             y, dtype=np.float64), exact=False)
         return self._targets(face, beta)
 

@@ -54,7 +54,7 @@ from ._plan import (
     _MAX_AUTO_STEPS,
     DERIVATIVE_WEIGHTS,
     NO_JACOBIAN,
-    _PhasedCosine,
+    _ClockCosine,
     _plan,
     _probe_step_time,
     _schedule,
@@ -365,6 +365,22 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md).
+    closest_after : float in [0, 1]
+        A mesh only: after this fraction of the fit (of the time budget, or of the steps),
+        the targets of each training point are taken at the mesh point nearest the network's
+        value ``S(p)`` (:meth:`_MeshTarget.closest`: the Phong point and interpolated normal
+        there), not at the embedding's correspondence of ``p``. The loss is then the squared
+        distance to the mesh (whose gradient is ``2 (S(p) - c)``) plus
+        ``closest_normal_weight`` times the normal error there, plus ``anchor_weight`` times
+        the squared distance to the correspondence, which keeps the parametrisation from
+        drifting without asking the network to follow the embedding's piecewise-linear
+        stretch. Default: chosen from the target's detail (``AUTO``): 1 (never) for a smooth
+        mesh, 0.2 for a detailed one; 1 for an analytic map and a warm start.
+        docs/fitting.md, "The nearest-point phase".
+    closest_normal_weight, anchor_weight : float
+        The weights of the nearest-point phase's normal term (0.01) and of its anchor (1).
+        Weight 1 on the normals is unstable there (the target normal moves with the point),
+        0.1 and 0.3 are no better than 0.01 (docs/fitting.md).
     readout_every : int
         Refit the output layer every this many steps (0: never) by ``readout="gn"``
         (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
@@ -460,15 +476,13 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         if sampler is not None and state is not None:
             sampler.load_state_dict(state["sampler"])
 
-        # with no step count the schedule runs on the clock: its decay ends with the budget;
-        # a nearest-point phase decays again from its own rate
+        # with no step count the schedule runs on the clock: its decay ends with the budget
         auto_steps = o["steps"] is None
         total = o["steps"] if not auto_steps else _MAX_AUTO_STEPS
+        if auto_steps and o["schedule"] == "cosine":
+            opt.schedule = _ClockCosine(opt.schedule, lambda: time.perf_counter() - t0,
+                                        o["time_budget"])
         closest = o["closest_after"] < 1.0
-        if o["schedule"] == "cosine" and (auto_steps or closest):
-            opt.schedule = _PhasedCosine(
-                opt.schedule, lambda t: _fraction_done(t, total, t0, o), o["closest_after"],
-                o["closest_lr"] if closest else None)
         bar = Progress(total if not auto_steps else 1, "fit", enabled=progress)
         t0 = time.perf_counter() - elapsed0
         w = o["normal_weight"]
@@ -479,7 +493,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         wh = o["hessian_weight"]
         order = 2 if wh else 1 if (w or wj) else 0
         if closest:
-            target.nearest          # built here, not by the engine's threads at once
+            target.nearest()        # built here, not by the engine's threads at once
         ema_pos = ema_nrm = None
         stopped = "step budget"
         step = start
@@ -726,7 +740,7 @@ def _evaluate(surface, target, n_eval):
                        bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(_angle(n, nt)
                        .mean()), normal_max_deg=float(_angle(n, nt).max()))
     if hasattr(target, "nearest"):      # a mesh: the geometry, whatever the parametrisation
-        face, beta, d = target.nearest.query(y)
+        face, beta, d = target.nearest().query(y)
         report.distance_mean = float(d.mean())
         report.closest_normal_mean_deg = float(_angle(n, target.corr.to_mesh(face, beta)[1])
                                                .mean())
