@@ -7,6 +7,7 @@ meshes, models) are reported as one line on stderr with exit status 2.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import sys
@@ -464,6 +465,10 @@ def _cmd_info(args):
               f"{fit.get('position_mean'):.3g} "
               f"(relative {fit.get('position_relative'):.2e}), normal error "
               f"{fit.get('normal_mean_deg'):.3f} deg")
+        dist, nrm = fit.get("distance_relative"), fit.get("closest_normal_mean_deg")
+        if isinstance(dist, float) and math.isfinite(dist) and isinstance(nrm, float):
+            print(f"  against the mesh: distance {dist:.2e} of the bbox diagonal, normal error "
+                  f"{nrm:.3f} deg at the nearest point")
         opts = fit.get("options", {})
         if opts:
             print(f"  fit options: {_printable(json.dumps(opts))}")

@@ -350,7 +350,7 @@ class FitOptions(Options):
         f"mesh point nearest each network point, not at the embedding's correspondence (1: "
         f"never; a mesh only; default: {_auto('closest_after')})", Fraction(), resume=True)
     closest_normal_weight: float = option(
-        0.01, "weight of the normal loss while targets are the nearest mesh points",
+        0.1, "weight of the normal loss while targets are the nearest mesh points",
         Real(allow_zero=True), resume=True)
     anchor_weight: float = option(
         1.0, "weight of the correspondence's position error while targets are the nearest "

@@ -18,7 +18,8 @@ __all__ = ["fit_many", "FIT_COLUMNS"]
 
 #: the columns of a fit summary, in order
 FIT_COLUMNS = ["name", "status", "message", "seconds", "steps", "stopped", "fit_seconds",
-               "position_mean", "position_relative", "normal_mean_deg", "resumed_from",
+               "position_mean", "position_relative", "normal_mean_deg", "distance_relative",
+               "closest_normal_mean_deg", "resumed_from",
                "threads", "worker", "output", "mesh"]
 
 #: options the batch sets itself for every fit
@@ -47,7 +48,9 @@ def _fit_figures(metadata):
     return {"steps": fit.get("steps"), "stopped": fit.get("stopped"),
             "fit_seconds": fit.get("seconds"), "position_mean": fit.get("position_mean"),
             "position_relative": fit.get("position_relative"),
-            "normal_mean_deg": fit.get("normal_mean_deg")}
+            "normal_mean_deg": fit.get("normal_mean_deg"),
+            "distance_relative": fit.get("distance_relative"),
+            "closest_normal_mean_deg": fit.get("closest_normal_mean_deg")}
 
 
 def _completed(out, recipe, mesh_sha):

@@ -10,6 +10,7 @@ need them.
 
 from .baselines import Curvatures, baseline_curvatures, discrete_curvatures
 from .check import MeshSummary, check
+from .closest import ClosestPoint
 from .correspondence import Correspondence, sample_surface, uniform_barycentric
 from .embedding import EmbeddingReport, mobius_centre, spherical_embedding
 from .equalise import equalise_areas
@@ -66,7 +67,7 @@ __all__ = [
     "equalise_areas", "FoldRepair", "orientation_determinants", "spherical_triangle_areas",
     "area_distortion", "face_stretch",
     # correspondence
-    "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator",
+    "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator", "ClosestPoint",
     # errors
     "MeshError", "MeshFileError", "MeshDefectError", "DegenerateFaceError", "DuplicateFaceError",
     "UnreferencedVertexError", "NonManifoldError", "BoundaryError", "OrientationError",

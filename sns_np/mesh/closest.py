@@ -5,8 +5,8 @@ A k-d tree over sites on the faces proposes the faces of the ``k`` nearest sites
 point-triangle distance picks among them. Every face carries enough sites (the centroids of a
 regular subdivision) that each of its points lies within ``rho`` of one of them, so a face
 whose sites all lie beyond the best distance found plus ``rho`` cannot be closer: the answer is
-exact whenever the ``k``-th site is that far, and the few points where it is not are checked
-against every face with a site within that reach.
+exact whenever the ``k``-th site is that far, and the few points where it is not are asked
+again with four times as many sites, until it is.
 """
 
 from __future__ import annotations
@@ -102,15 +102,15 @@ class ClosestPoint:
     V : (n, 3) float array
     F : (m, 3) int array
     k : int
-        Faces proposed per query by the centroid tree (more: fewer fallback checks).
+        Sites (so faces) proposed per query at first; more: fewer repeated queries.
 
     Examples
     --------
     >>> from sns_np.mesh import icosphere
     >>> V, F = icosphere(2)
     >>> face, beta, d = ClosestPoint(V, F).query([[0.0, 0.0, 2.0], [0.1, 0.2, 0.3]])
-    >>> np.round(d, 3).tolist()                 # 1 outside the unit sphere, about 0.6 inside
-    [1.0, 0.62]
+    >>> np.round(d, 3).tolist()                 # 1 outside the unit sphere; inside, the polyhedron
+    [1.0, 0.611]
     >>> bool(np.allclose(beta.sum(axis=1), 1.0))
     True
     """

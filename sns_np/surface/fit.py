@@ -84,8 +84,8 @@ class FitReport:
     >>> report.steps, report.stopped, report.options["input_scale"]   # smooth: scale 4
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
-    ['detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr', 'normal_weight',
-     'optimizer', 'sampling', 'warmup']
+    ['closest_after', 'detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr',
+     'normal_weight', 'optimizer', 'sampling', 'warmup']
     """
 
     steps: int = 0
@@ -378,9 +378,10 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         mesh, 0.2 for a detailed one; 1 for an analytic map and a warm start.
         docs/fitting.md, "The nearest-point phase".
     closest_normal_weight, anchor_weight : float
-        The weights of the nearest-point phase's normal term (0.01) and of its anchor (1).
-        Weight 1 on the normals is unstable there (the target normal moves with the point),
-        0.1 and 0.3 are no better than 0.01 (docs/fitting.md).
+        The weights of the nearest-point phase's normal term (0.1) and of its anchor (1).
+        Weight 1 on the normals is unstable there (the target normal moves with the point);
+        0.01 lets the surface follow the mesh's facets (spot's normals), 0.3 gives up
+        distance (docs/fitting.md).
     readout_every : int
         Refit the output layer every this many steps (0: never) by ``readout="gn"``
         (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
