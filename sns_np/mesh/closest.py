@@ -153,6 +153,14 @@ class ClosestPoint:
         face : (n,) int array
         beta : (n, 3) float array, barycentric coordinates in ``F[face]``
         distance : (n,) float array
+
+        Examples
+        --------
+        >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+        >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+        >>> face, beta, d = ClosestPoint(V, F).query([[0.2, 0.2, -1.0]])
+        >>> int(face[0]), np.round(beta[0], 2).tolist(), float(d[0])   # below face 0
+        (0, [0.6, 0.2, 0.2], 1.0)
         """
         X = np.ascontiguousarray(np.asarray(X, dtype=np.float64))
         if X.ndim != 2 or X.shape[1] != 3:
