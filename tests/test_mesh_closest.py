@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from sns_np.mesh import icosphere
-from sns_np.mesh.closest import ClosestPoint, _closest_on_triangle, _subdivision_centroids
+from sns_np.mesh.closest import ClosestPoint, _closest_on_triangle
+from sns_np.mesh.equalise import _subtriangle_centroids
 
 
 def _grid_distance(x, T, m=120):
@@ -32,7 +33,7 @@ def test_closest_on_triangle_matches_a_fine_grid():
 
 def test_subdivision_centroids_are_the_pieces_centroids():
     for level in range(4):
-        beta = _subdivision_centroids(level)
+        beta = _subtriangle_centroids(2 ** level)
         assert beta.shape == (4 ** level, 3)
         assert np.allclose(beta.sum(axis=1), 1.0) and (beta > 0).all()
         assert len(np.unique(np.round(beta, 12), axis=0)) == 4 ** level

@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from ._arrays import as_mesh
+from .equalise import _subtriangle_centroids
 
 __all__ = ["ClosestPoint"]
 
@@ -81,19 +82,6 @@ def _nearest_among(X, V, F, cand, face, beta, d2):
         d2[i] = best
 
 
-def _subdivision_centroids(level):
-    """Barycentric centroids of the 4^level triangles of a regular subdivision."""
-    m = 2 ** level
-    out = []
-    for i in range(m):
-        for j in range(m - i):
-            out.append(((i + 1 / 3) / m, (j + 1 / 3) / m))           # upward triangles
-            if i + j < m - 1:
-                out.append(((i + 2 / 3) / m, (j + 2 / 3) / m))       # downward ones
-    a = np.array(out)
-    return np.column_stack([1.0 - a.sum(axis=1), a])
-
-
 class ClosestPoint:
     """Nearest points of a triangle mesh, exact (see the module's note).
 
@@ -129,7 +117,7 @@ class ClosestPoint:
         sites, owner = [T.mean(axis=1)], [np.arange(len(T))]
         for lev in np.unique(level[level > 0]):
             f = np.flatnonzero(level == lev)
-            beta = _subdivision_centroids(int(lev))              # (4^l, 3)
+            beta = _subtriangle_centroids(2 ** int(lev))         # (4^l, 3)
             sites.append(np.einsum("sc,fci->fsi", beta, T[f]).reshape(-1, 3))
             owner.append(np.repeat(f, len(beta)))
         # the centroid of a subdivided face is one of its pieces' only when l = 0: keep it

@@ -736,10 +736,11 @@ def _evaluate(surface, target, n_eval):
     JR = tangent_jacobian(J, tangent_frame(p))
     n, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
     err = np.linalg.norm(y - q, axis=1)
+    ang = _angle(n, nt)
     report = FitReport(position_mean=float(err.mean()), position_rms=float(np.sqrt((err ** 2)
                        .mean())), position_max=float(err.max()),
-                       bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(_angle(n, nt)
-                       .mean()), normal_max_deg=float(_angle(n, nt).max()))
+                       bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(ang.mean()),
+                       normal_max_deg=float(ang.max()))
     if hasattr(target, "nearest"):      # a mesh: the geometry, whatever the parametrisation
         face, beta, d = target.nearest().query(y)
         report.distance_mean = float(d.mean())
