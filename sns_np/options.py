@@ -233,6 +233,16 @@ SAMPLINGS = ("area", "error")
 #: 1 against 3.66e-3 at 0.1, and H at the closest point 117% against 57%).
 NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 
+#: the normal weight of the nearest-point phase that "auto" chooses: ``CLOSEST_NORMAL_AREA``
+#: times the mesh's mean face area (normalised units, total 4 pi), at most
+#: ``CLOSEST_NORMAL_MAX``. The term then counts a normal error theta as the position error
+#: theta * L it makes across a patch of about 50 faces (L^2 = 50 x the mean face area), so a
+#: finer mesh, whose positions carry more of the shape, leans on them more. Measured at 540 s
+#: (docs/fitting.md, "The nearest-point phase"): spot (6,446 faces) is best near 0.1 (0.72
+#: deg; 0.01 gives 1.37), the armadillo (43,240) near 0.01 (2.29 deg; 0.1 gives 2.79)
+CLOSEST_NORMAL_AREA = 50.0
+CLOSEST_NORMAL_MAX = 0.1
+
 #: the weight of the Jacobian loss (the derivatives along the sphere, ``losses.jacobian_loss``)
 #: that "auto" chooses. An analytic map's derivatives are exact data: matching them puts the
 #: first derivatives under direct control and the second ones (curvature) follow (fit_shape,
@@ -349,8 +359,10 @@ class FitOptions(Options):
         None, f"fraction of the fit after which positions and normals are compared at the "
         f"mesh point nearest each network point, not at the embedding's correspondence (1: "
         f"never; a mesh only; default: {_auto('closest_after')})", Fraction(), resume=True)
-    closest_normal_weight: float = option(
-        0.1, "weight of the normal loss while targets are the nearest mesh points",
+    closest_normal_weight: float | None = option(
+        None, f"weight of the normal loss while targets are the nearest mesh points "
+        f"(default: {CLOSEST_NORMAL_AREA:g} x the mean face area in normalised units, at most "
+        f"{CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its positions)",
         Real(allow_zero=True), resume=True)
     anchor_weight: float = option(
         1.0, "weight of the correspondence's position error while targets are the nearest "

@@ -5,7 +5,8 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
-from sns_np.options import HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from sns_np.options import (CLOSEST_NORMAL_AREA, CLOSEST_NORMAL_MAX, HESSIAN_WEIGHT,
+                            JACOBIAN_WEIGHT, NORMAL_WEIGHT)
 from sns_np.shapes import Ellipsoid
 from sns_np.surface import (
     SphericalNeuralSurface,
@@ -444,3 +445,20 @@ def test_closest_phase_is_a_mesh_option_and_is_recorded():
     assert "against the mesh: distance" in r.summary()
     _, r = fit_mesh(V, F, steps=2, **{k: v for k, v in TINY.items() if k != "input_scale"})
     assert r.options["closest_after"] == 1.0 and "smooth" in r.choices["closest_after"]["why"]
+
+
+def test_closest_normal_weight_follows_the_mean_face_area():
+    # 50 x the mean face area in normalised units (total 4 pi), at most 0.1: a mesh of 320
+    # faces is coarse enough for the cap, one of 20,480 is not
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    for level in (2, 5):
+        V, F = E.mesh(level)
+        Vs = V / np.linalg.norm(V, axis=1, keepdims=True)      # a radial mesh's embedding
+        _, r = fit_mesh(V, F, Vs=Vs, steps=1, **TINY)
+        want = min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * 4 * np.pi / len(F))
+        assert r.options["closest_normal_weight"] == pytest.approx(want)
+        assert r.choices["closest_normal_weight"]["value"] == pytest.approx(want)
+        assert (want == CLOSEST_NORMAL_MAX) == (level == 2)
+    _, r = fit_mesh(V, F, Vs=Vs, steps=1, closest_normal_weight=0.5, **TINY)
+    assert r.options["closest_normal_weight"] == 0.5
+    assert "closest_normal_weight" not in r.choices              # given, not chosen

@@ -10,7 +10,8 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import AUTO, DETAIL_RANGE, HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT
+from ..options import (AUTO, CLOSEST_NORMAL_AREA, CLOSEST_NORMAL_MAX, DETAIL_RANGE,
+                       HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT)
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
@@ -130,6 +131,17 @@ def _plan(target, o, net, elapsed=0.0):
         choices["closest_after"] = {
             "value": 1.0, "why": "a warm start: the targets stay those of the "
             "parametrisation" if nearest else "no mesh: the targets are the map's own"}
+    if o["closest_normal_weight"] is None:
+        if nearest:
+            a = target.mean_face_area
+            o["closest_normal_weight"] = min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * a)
+            choices["closest_normal_weight"] = {
+                "value": o["closest_normal_weight"],
+                "why": f"{CLOSEST_NORMAL_AREA:g} x the mean face area ({a:.3g}, normalised), "
+                       f"at most {CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its "
+                       f"positions"}
+        else:       # no nearest-point phase without a mesh: the weight is never used
+            o["closest_normal_weight"] = CLOSEST_NORMAL_MAX
     exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
     for name in DERIVATIVE_WEIGHTS:
         if o[name] and not exact:

@@ -40,6 +40,7 @@ class _MeshTarget:
         self.area = float(areas.sum())
         self.center = (areas[:, None] * self.face_centroid).sum(axis=0) / self.area
         self.scale = float(np.sqrt(self.area / (4 * np.pi)))
+        self.mean_face_area = 4 * np.pi / len(F)     # normalised units (total 4 pi)
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
         self.smooth = smooth
