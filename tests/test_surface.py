@@ -5,8 +5,13 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
-from sns_np.options import (CLOSEST_NORMAL_AREA, CLOSEST_NORMAL_MAX, HESSIAN_WEIGHT,
-                            JACOBIAN_WEIGHT, NORMAL_WEIGHT)
+from sns_np.options import (
+    CLOSEST_NORMAL_AREA,
+    CLOSEST_NORMAL_MAX,
+    HESSIAN_WEIGHT,
+    JACOBIAN_WEIGHT,
+    NORMAL_WEIGHT,
+)
 from sns_np.shapes import Ellipsoid
 from sns_np.surface import (
     SphericalNeuralSurface,

@@ -10,8 +10,15 @@ import numpy as np
 from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
-from ..options import (AUTO, CLOSEST_NORMAL_AREA, CLOSEST_NORMAL_MAX, DETAIL_RANGE,
-                       HESSIAN_WEIGHT, JACOBIAN_WEIGHT, NORMAL_WEIGHT)
+from ..options import (
+    AUTO,
+    CLOSEST_NORMAL_AREA,
+    CLOSEST_NORMAL_MAX,
+    DETAIL_RANGE,
+    HESSIAN_WEIGHT,
+    JACOBIAN_WEIGHT,
+    NORMAL_WEIGHT,
+)
 from ..sampling import uniform_sphere
 
 #: the most steps a fit with no step count takes (it normally stops on its time budget)
