@@ -139,15 +139,15 @@ def _plan(target, o, net, elapsed=0.0):
             "value": 1.0, "why": "a warm start: the targets stay those of the "
             "parametrisation" if nearest else "no mesh: the targets are the map's own"}
     if o["closest_normal_weight"] is None:
-        if nearest:
-            a = target.mean_face_area
+        a = getattr(target, "mean_face_area", None)
+        if nearest and a is not None:
             o["closest_normal_weight"] = min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * a)
             choices["closest_normal_weight"] = {
                 "value": o["closest_normal_weight"],
                 "why": f"{CLOSEST_NORMAL_AREA:g} x the mean face area ({a:.3g}, normalised), "
                        f"at most {CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its "
                        f"positions"}
-        else:       # no nearest-point phase without a mesh: the weight is never used
+        else:       # no faces to measure (or no nearest points at all): the safe cap
             o["closest_normal_weight"] = CLOSEST_NORMAL_MAX
     exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
     for name in DERIVATIVE_WEIGHTS:
