@@ -464,6 +464,8 @@ def test_closest_normal_weight_follows_the_mean_face_area():
         assert r.options["closest_normal_weight"] == pytest.approx(want)
         assert r.choices["closest_normal_weight"]["value"] == pytest.approx(want)
         assert (want == CLOSEST_NORMAL_MAX) == (level == 2)
+        if level == 5:
+            assert want == pytest.approx(50 * 4 * np.pi / 20480)   # 0.0307
     _, r = fit_mesh(V, F, Vs=Vs, steps=1, closest_normal_weight=0.5, **TINY)
     assert r.options["closest_normal_weight"] == 0.5
     assert "closest_normal_weight" not in r.choices              # given, not chosen
