@@ -4,6 +4,7 @@ Run::
 
     python benchmarks/race_paper_recipe.py                 # spot, each side ~9 minutes
     python benchmarks/race_paper_recipe.py --seconds 60    # a short race (smoke test)
+    python benchmarks/race_paper_recipe.py --save spot.npz # and keep sns_np's surface
 
 Both sides start from one spherical embedding of the mesh (computed once here) and get the
 same wall time on this CPU, one after the other (never at once: two heavy jobs on a 2-core
@@ -127,6 +128,8 @@ def main(argv=None):
                     help="training seconds per side (default: sns_np's own budget for the "
                          "mesh, less the embedding)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--save", metavar="MODEL",
+                    help="also save sns_np's final surface (.npz), e.g. for a curvature map")
     args = ap.parse_args(argv)
     try:
         import igl  # noqa: F401
@@ -152,6 +155,8 @@ def main(argv=None):
           f"(wall {time.perf_counter() - t:.0f} s); chosen "
           + ", ".join(f"{k} {v['value']:.3g}" if isinstance(v["value"], float)
                       else f"{k} {v['value']}" for k, v in report.choices.items()))
+    if args.save:
+        S.save(args.save)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
         theirs, info = run_recipe(V, F, Vs, S.center, S.scale, times, report.seconds,

@@ -238,7 +238,7 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 #: ``CLOSEST_NORMAL_MAX``. The term then counts a normal error theta as the position error
 #: theta * L it makes across a patch of about 50 faces (L^2 = 50 x the mean face area), so a
 #: finer mesh, whose positions carry more of the shape, leans on them more. Measured at 540 s
-#: (docs/fitting.md, "The nearest-point phase"): spot (6,446 faces) is best near 0.1 (0.72
+#: (docs/fitting.md, "The nearest-point phase"): spot (5,856 faces) is best near 0.1 (0.72
 #: deg; 0.01 gives 1.37), the armadillo (43,240) near 0.01 (2.29 deg; 0.1 gives 2.79)
 CLOSEST_NORMAL_AREA = 50.0
 CLOSEST_NORMAL_MAX = 0.1
