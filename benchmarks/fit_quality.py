@@ -9,6 +9,7 @@ Run::
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
     python benchmarks/fit_quality.py detail                  # the detail measure of each case
     python benchmarks/fit_quality.py loop spot max           # a Loop surface on the same measures
+    python benchmarks/fit_quality.py models A.npz flower=B.npz  # saved fits: roughness, drift
 
 Cases:
 
@@ -40,6 +41,14 @@ measures (``dist``, ``nrm``): what a classical smooth surface near the mesh reac
 the mesh's own interpolated normals, the reference for the normal goal. For ``bobble5`` and
 ``spike5``: how far the mesh's interpolated normals and its Loop surface's are from the exact
 shape's (closest point, away from the poles), what a fit that follows the mesh can know.
+
+``models``: no fit; saved models (``--out``) scored by the roughness of their mean curvature
+(the mean of ``|H(p) - H(p')|`` over pairs of sphere points 1e-3 rad apart, in a random
+direction, relative to the mean ``|H|``: streaks and wrinkles raise it). A model named
+``SHAPE=PATH`` (``flower=B.npz``), a ``fit_shape`` of a paper shape, is also split into where
+its points are: the distance to the exact point at the same sphere point, its parts along the
+normal and along the surface, and how much the exact H differs between the same point and the
+closest one (the part of the closest-point error that the drift alone makes).
 
 Nothing is asserted; timings on a shared machine are noisy, so compare them within one run.
 """
@@ -349,6 +358,55 @@ def loop_case(args):
               f"{r['nrm']:.2f} deg (median {r['nrm_median']:.2f})", flush=True)
 
 
+def curvature_roughness(S, n=40000, eps=1e-3):
+    """Mean ``|H(p) - H(p')|`` over ``n`` pairs of sphere points ``eps`` rad apart (random
+    tangent direction), relative to the mean ``|H|``."""
+    p = uniform_sphere(n, rng=3)
+    R = tangent_frame(p)
+    a = np.random.default_rng(4).random(n) * 2 * np.pi
+    q = p + eps * (R[:, :, 0] * np.cos(a)[:, None] + R[:, :, 1] * np.sin(a)[:, None])
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    H1, H2 = differential_quantities(S, p).H, differential_quantities(S, q).H
+    return float(np.abs(H1 - H2).mean() / np.abs(H1).mean())
+
+
+def parameter_drift(S, shape, n=20000):
+    """Where a ``fit_shape`` fit's points are, away from the poles: the mean distance to the
+    exact point of the same sphere point, its normal and tangential parts, and the mean
+    difference of the exact H between the closest point and the same point (relative to
+    the mean |H|)."""
+    p = uniform_sphere(n, rng=11)
+    x = S(p)
+    dT = differential_quantities(shape, p)
+    e = x - dT.x
+    en = np.einsum("ij,ij->i", e, dT.n)
+    m = np.arccos(np.clip(np.abs(p[:, 2]), 0, 1)) > POLE
+    pc = _project(shape, x, x / np.linalg.norm(x, axis=1, keepdims=True), iters=6)
+    Hc = differential_quantities(shape, pc).H
+    return {"drift": float(np.linalg.norm(e, axis=1)[m].mean()),
+            "normal": float(np.abs(en)[m].mean()),
+            "tangential": float(np.linalg.norm(e - en[:, None] * dT.n, axis=1)[m].mean()),
+            "H_moved": float(np.abs(Hc - dT.H)[m].mean() / np.abs(dT.H[m]).mean())}
+
+
+def models_case(args):
+    """Saved models: the roughness of their mean curvature; for ``SHAPE=PATH``, the drift."""
+    from sns_np import SphericalNeuralSurface
+    if len(args.cases) < 2:
+        sys.exit("models needs one or more saved models: PATH or SHAPE=PATH")
+    for spec in args.cases[1:]:
+        name, _, path = spec.rpartition("=")
+        if name and name not in SHAPES:
+            sys.exit(f"unknown shape {name!r} in {spec!r}; expected one of {', '.join(SHAPES)}")
+        S = SphericalNeuralSurface.load(path)
+        line = f"{path}: H roughness {curvature_roughness(S):.3f}"
+        if name:
+            d = parameter_drift(S, _shape(name))
+            line += (f"; {name}: drift {d['drift']:.2e} (normal {d['normal']:.2e}, tangential "
+                     f"{d['tangential']:.2e}), exact H moved by it {d['H_moved']:.2%}")
+        print(line, flush=True)
+
+
 def detail_case(args):
     """The detail measure that chooses the fitting defaults, for every case."""
     from sns_np.surface.fit import _MeshTarget, _ShapeTarget, detail
@@ -371,7 +429,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("cases", nargs="*", default=list(ALL),
                     help=f"cases among {', '.join(ALL)}, or dtype / init / detail, or loop "
-                         f"followed by mesh cases (default: all)")
+                         f"followed by mesh cases, or models followed by saved models "
+                         f"(default: all)")
     for name, typ in (("width", int), ("depth", int), ("steps", int), ("batch", int),
                       ("lr", float), ("time-budget", float), ("input-scale", float),
                       ("normal-weight", float), ("vertex-fraction", float),
@@ -395,6 +454,9 @@ def main(argv=None):
         return
     if args.cases and args.cases[0] == "loop":
         loop_case(args)
+        return
+    if args.cases and args.cases[0] == "models":
+        models_case(args)
         return
     bad = [c for c in args.cases if c not in ALL]
     if bad:
