@@ -100,6 +100,11 @@ def fit_options(args):
 
 # ------------------------------------------------------------------------------ measures
 
+def _off_poles(p):
+    """The sphere points more than POLE rad from both poles (a boolean mask)."""
+    return np.arccos(np.clip(np.abs(p[:, 2]), 0, 1)) > POLE
+
+
 def _project(S, x, p, iters=4):
     """Sphere points whose image under S is nearest to x, by Gauss-Newton from p."""
     for _ in range(iters):
@@ -188,7 +193,7 @@ def analytic_errors(S, shape, n=20000, at="closest", p=None):
     if at == "closest":
         p = _project(shape, dS.x, dS.x / np.linalg.norm(dS.x, axis=1, keepdims=True), iters=6)
     dT = differential_quantities(shape, p)
-    m = np.arccos(np.clip(np.abs(p[:, 2]), 0, 1)) > POLE
+    m = _off_poles(p)
     ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", dS.n, dT.n), -1, 1)))
     return {"nrm": float(ang[m].mean()),
             "H": float(np.abs(dS.H - dT.H)[m].mean() / np.abs(dT.H[m]).mean()),
@@ -331,7 +336,7 @@ def exact_normal_floor(shape, V, F, n=20000):
         nx = np.einsum("kc,kci->ki", b, N[FF[f]])
         nx /= np.linalg.norm(nx, axis=1, keepdims=True)
         p = _project(shape, X, X / np.linalg.norm(X, axis=1, keepdims=True), iters=6)
-        m = np.arccos(np.clip(np.abs(p[:, 2]), 0, 1)) > POLE
+        m = _off_poles(p)
         nt = differential_quantities(shape, p).n
         out[label] = float(np.degrees(np.arccos(np.clip(
             np.einsum("ij,ij->i", nx, nt), -1, 1)))[m].mean())
@@ -380,7 +385,7 @@ def parameter_drift(S, shape, n=20000):
     dT = differential_quantities(shape, p)
     e = x - dT.x
     en = np.einsum("ij,ij->i", e, dT.n)
-    m = np.arccos(np.clip(np.abs(p[:, 2]), 0, 1)) > POLE
+    m = _off_poles(p)
     pc = _project(shape, x, x / np.linalg.norm(x, axis=1, keepdims=True), iters=6)
     Hc = differential_quantities(shape, pc).H
     return {"drift": float(np.linalg.norm(e, axis=1)[m].mean()),
