@@ -10,6 +10,7 @@ Run::
     python benchmarks/fit_quality.py detail                  # the detail measure of each case
     python benchmarks/fit_quality.py loop spot max           # a Loop surface on the same measures
     python benchmarks/fit_quality.py models A.npz flower=B.npz  # saved fits: roughness, drift
+    python benchmarks/fit_quality.py path/to/mesh.obj        # any closed genus-0 mesh file
 
 Cases:
 
@@ -22,7 +23,8 @@ Cases:
   steps on the sphere), so a surface that skips a feature is caught. ``nrm`` is the mean angle
   between the fitted normal and the mesh's interpolated (angle-weighted) vertex normal at the
   closest mesh point. Needs libigl. The meshes whose vertices lie on a known surface (the
-  flowers, the spheres) are also compared with it, as the next item says.
+  flowers, the spheres) are also compared with it, as the next item says. The path of any
+  mesh file (``.obj``, ``.off``, ``.ply``, ``.stl``) is a case too, measured the same way.
 * ``bobble5``, ``spike5``: the paper's BOBBLE and SPIKE meshed at icosphere level 5 (10,242
   vertices) and fitted as meshes (and flower3, flower5, the spheres); ``flower``,
   ``bobble``, ``spike``, ``tree``: ``fit_shape`` on the exact maps. All are compared with the
@@ -88,6 +90,12 @@ ALL = (*MESHES, "ellipsoid", *ANALYTIC_MESHES, *SHAPES)
 SHARED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data",
                       "meshes")
 POLE = 0.15
+
+
+def _is_mesh_file(case):
+    """A case that names an existing mesh file (any format ``sns_np.mesh.load`` reads)."""
+    return os.path.splitext(case)[1].lower() in (".obj", ".off", ".ply", ".stl") and \
+        os.path.isfile(case)
 
 
 def fit_options(args):
@@ -248,7 +256,9 @@ def run_case(case, args):
         elif case in ANALYTIC_MESHES:
             shape = _shape(case[:-1])
             V, F = shape.mesh(5)
-        else:
+        elif _is_mesh_file(case):        # a user's mesh: scored against itself only
+            V, F = load(case)[:2]
+        elif case in MESHES:
             V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
             if case in EXACT:
                 shape = _shape(*EXACT[case])
@@ -286,7 +296,8 @@ def run_case(case, args):
         row["exact_K"] = float(np.abs(dq.K - K_ref).mean() / np.abs(K_ref).mean())
     if args.out:
         os.makedirs(args.out, exist_ok=True)
-        S.save(os.path.join(args.out, f"{case}.npz"))
+        name = os.path.splitext(os.path.basename(case))[0] if _is_mesh_file(case) else case
+        S.save(os.path.join(args.out, f"{name}.npz"))
     return row
 
 
@@ -463,9 +474,10 @@ def main(argv=None):
     if args.cases and args.cases[0] == "models":
         models_case(args)
         return
-    bad = [c for c in args.cases if c not in ALL]
+    bad = [c for c in args.cases if c not in ALL and not _is_mesh_file(c)]
     if bad:
-        ap.error(f"unknown case(s) {bad}; expected some of {', '.join(ALL)}")
+        ap.error(f"unknown case(s) {bad}; expected some of {', '.join(ALL)}, or the path of "
+                 f"a mesh file")
     print(f"options: {fit_options(args) or 'defaults'}")
     for i, case in enumerate(args.cases):
         print_row(run_case(case, args), header=i == 0)
