@@ -38,6 +38,12 @@ Cases:
   parametrisation is the shape's own), the kinder measure: it does not see a surface shifted
   along itself.
 
+* ``cube``, ``jack``, ``cylinder`` (``cad_shapes.py``): meshes with sharp edges and flat
+  faces, built here, measured against the mesh as above and, more than 0.1 from their edges,
+  against their closed form: ``exact_nrm`` the normal angle, ``flat_H`` the mean |H - H_true|
+  (0 on the flat parts, 1/(2 R) on the cylinder's side) times the radius of the sphere of the
+  same area (a sphere's H would read 1).
+
 ``loop``: no fit; the mesh's Loop subdivision surface (two levels, libigl) on the same
 measures (``dist``, ``nrm``): what a classical smooth surface near the mesh reaches against
 the mesh's own interpolated normals, the reference for the normal goal. For ``bobble5`` and
@@ -66,6 +72,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from cad_shapes import CAD, cad_mesh, exact_away_from_edges  # noqa: E402
+
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
 from sns_np.mesh import check, load, sample_surface, spherical_embedding  # noqa: E402
 from sns_np.mesh.operators import vertex_normals  # noqa: E402
@@ -86,7 +94,7 @@ EXACT = {"flower3": ("flower", None), "flower5": ("flower", None),
          "uv_sphere": ("sphere", 0.7)}
 ANALYTIC_MESHES = ("bobble5", "spike5")
 SHAPES = ("flower", "bobble", "spike", "tree")
-ALL = (*MESHES, "ellipsoid", *ANALYTIC_MESHES, *SHAPES)
+ALL = (*MESHES, "ellipsoid", *ANALYTIC_MESHES, *SHAPES, *CAD)
 SHARED = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared", "data",
                       "meshes")
 POLE = 0.15
@@ -256,6 +264,8 @@ def run_case(case, args):
         elif case in ANALYTIC_MESHES:
             shape = _shape(case[:-1])
             V, F = shape.mesh(5)
+        elif case in CAD:
+            V, F = cad_mesh(case)
         elif _is_mesh_file(case):        # a user's mesh: scored against itself only
             V, F = load(case)[:2]
         elif case in MESHES:
@@ -286,6 +296,8 @@ def run_case(case, args):
             # the fit where libigl is scored: at the surface points nearest the vertices
             row.update({f"vtx_{k}": v for k, v in analytic_errors(
                 S, shape, p=nearest_parameters(S, V)).items()})
+    if case in CAD:
+        row.update(cad_errors(S, case, V, F))
     if case == "ellipsoid":
         from sns_np.demo import ellipsoid_foot_point, ellipsoid_geometry
         dq = differential_quantities(S, uniform_sphere(20000, rng=2024))
@@ -306,8 +318,8 @@ COLUMNS = [("case", "{}"), ("vertices", "{}"), ("total_s", "{:.0f}"), ("steps", 
            ("heldout_nrm", "{:.2f}"), ("exact_nrm", "{:.3f}"), ("exact_H", "{:.2%}"),
            ("exact_K", "{:.2%}"), ("same_nrm", "{:.3f}"), ("same_H", "{:.2%}"),
            ("same_K", "{:.2%}"), ("vtx_nrm", "{:.3f}"), ("vtx_H", "{:.2%}"),
-           ("vtx_K", "{:.2%}"), ("libigl_nrm", "{:.2f}"), ("libigl_H", "{:.1%}"),
-           ("libigl_K", "{:.1%}")]
+           ("vtx_K", "{:.2%}"), ("flat_H", "{:.4f}"), ("libigl_nrm", "{:.2f}"),
+           ("libigl_H", "{:.1%}"), ("libigl_K", "{:.1%}")]
 
 
 def print_row(row, header=False):
@@ -374,6 +386,19 @@ def loop_case(args):
               f"{r['nrm']:.2f} deg (median {r['nrm_median']:.2f})", flush=True)
 
 
+def cad_errors(S, case, V, F, n=100_000, margin=0.1):
+    """A CAD-like case's normal error (degrees) and mean |H - H_true| away from its edges
+    (more than ``margin``), H times the radius of the sphere of the mesh's area, so that
+    it reads against a sphere's 1."""
+    from sns_np.mesh import face_areas
+    dq = differential_quantities(S, uniform_sphere(n, rng=8), on_degenerate="nan")
+    m, n_true, H_true = exact_away_from_edges(case, dq.x, margin)
+    ang = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", dq.n, n_true), -1, 1)))
+    r = np.sqrt(face_areas(V, F).sum() / (4 * np.pi))
+    return {"exact_nrm": float(np.nanmean(ang[m])),
+            "flat_H": float(np.nanmean(np.abs(dq.H - H_true)[m]) * r)}
+
+
 def curvature_roughness(S, n=40000, eps=1e-3):
     """Mean ``|H(p) - H(p')|`` over ``n`` pairs of sphere points ``eps`` rad apart (random
     tangent direction), relative to the mean ``|H|``."""
@@ -435,6 +460,8 @@ def detail_case(args):
                 V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
             elif case in ANALYTIC_MESHES:
                 V, F = _shape(case[:-1]).mesh(5)
+            elif case in CAD:
+                V, F = cad_mesh(case)
             else:
                 V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
             target, n = _MeshTarget(V, F, verbose=False), len(V)
