@@ -10,9 +10,9 @@ fit there, and their geometry is known in closed form away from the edges:
 * ``jack``: seven unit voxels, a centre and one on each side of it (a 3-D cross 3 wide), each
   exposed unit face a 16 x 16 grid (7,682 vertices). Convex and concave edges, and corners
   where three concave edges meet.
-* ``cylinder``: radius 1, height 2.5, 96 segments round, 24 rows up the side, and caps of 16
-  rings fanned into their centres (3,458 vertices): a flat cap meets the round side at a sharp
-  rim, and the caps' triangles shrink to slivers at the centre.
+* ``cylinder``: radius 1, height 2.5, 96 segments round, 24 rows up the side, and caps of 15
+  rings inside the rim, fanned into their centres (5,282 vertices): a flat cap meets the round
+  side at a sharp rim, and the caps' triangles shrink to slivers at the centre.
 
 :func:`exact_away_from_edges` gives, at points of a fitted surface more than ``margin`` from
 the edges, the exact unit normal and mean curvature there (H = 0 on the flat parts, 1/(2 R) on
@@ -72,7 +72,8 @@ def _polycube(voxels, n, size=1.0):
 
 def _cylinder(R, h, segments, rows, rings):
     """A capped cylinder about the z axis: the side a ``segments`` x ``rows`` grid, each cap
-    ``rings`` concentric rings of ``segments`` points fanned into its centre."""
+    ``rings - 1`` concentric rings of ``segments`` points inside the rim, fanned into its
+    centre."""
     th = 2 * np.pi * np.arange(segments) / segments
     ring = np.stack([np.cos(th), np.sin(th)], 1)
     loops = [np.c_[R * ring, np.full(segments, z)] for z in np.linspace(-h / 2, h / 2,
