@@ -246,32 +246,35 @@ def _shape(name, radius=None):
             "tree": shapes.Tree}[name]()
 
 
+def case_mesh(case, shared=SHARED):
+    """The mesh of a mesh case, ``(V, F, shape)``: ``shape`` the analytic surface its
+    vertices lie on, or None."""
+    if case == "ellipsoid":
+        from sns_np.shapes import Ellipsoid
+        return (*Ellipsoid(1.0, 1.3, 0.7).mesh(4), None)
+    if case in ANALYTIC_MESHES:
+        shape = _shape(case[:-1])
+        return (*shape.mesh(5), shape)
+    if case in CAD:
+        return (*cad_mesh(case), None)
+    if _is_mesh_file(case):              # a user's mesh: scored against itself only
+        return (*load(case)[:2], None)
+    V, F = load(os.path.join(shared, MESHES[case]))[:2]
+    return V, F, _shape(*EXACT[case]) if case in EXACT else None
+
+
 def run_case(case, args):
     """Fit one case; returns the table row (a dict)."""
     opts = fit_options(args)
     row = {"case": case}
     t0 = time.perf_counter()
-    shape = None
     if case in SHAPES:
         shape = _shape(case)
         opts.pop("vertex_fraction", None)          # an analytic map has no vertices
         S, rep = fit_shape(shape, progress=not args.quiet, **opts)
         row["vertices"] = "-"
     else:
-        if case == "ellipsoid":
-            from sns_np.shapes import Ellipsoid
-            V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
-        elif case in ANALYTIC_MESHES:
-            shape = _shape(case[:-1])
-            V, F = shape.mesh(5)
-        elif case in CAD:
-            V, F = cad_mesh(case)
-        elif _is_mesh_file(case):        # a user's mesh: scored against itself only
-            V, F = load(case)[:2]
-        elif case in MESHES:
-            V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
-            if case in EXACT:
-                shape = _shape(*EXACT[case])
+        V, F, shape = case_mesh(case, args.shared)
         check(V, F)
         Vs, _ = spherical_embedding(V, F, verbose=False)
         row["embedding_s"] = time.perf_counter() - t0
@@ -372,15 +375,13 @@ def loop_case(args):
     ones."""
     names = [c for c in args.cases[1:] if c in MESHES or c in ANALYTIC_MESHES] or list(MESHES)
     for case in names:
+        V, F, shape = case_mesh(case, args.shared)
         if case in ANALYTIC_MESHES:
-            shape = _shape(case[:-1])
-            V, F = shape.mesh(5)
             r = exact_normal_floor(shape, V, F)
             print(f"{case}: normals at the closest point of the exact shape: the mesh's "
                   f"interpolated {r['mesh']:.2f} deg, its Loop surface {r['loop']:.2f} deg",
                   flush=True)
             continue
-        V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
         r = loop_reference(V, F)
         print(f"{case}: Loop subdivision (2 levels): dist {r['dist']:.2e}, nrm "
               f"{r['nrm']:.2f} deg (median {r['nrm_median']:.2f})", flush=True)
@@ -455,15 +456,7 @@ def detail_case(args):
         if case in SHAPES:
             target, n = _ShapeTarget(_shape(case)), "-"
         else:
-            if case == "ellipsoid":
-                from sns_np.shapes import Ellipsoid
-                V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
-            elif case in ANALYTIC_MESHES:
-                V, F = _shape(case[:-1]).mesh(5)
-            elif case in CAD:
-                V, F = cad_mesh(case)
-            else:
-                V, F = load(os.path.join(args.shared, MESHES[case]))[:2]
+            V, F, _ = case_mesh(case, args.shared)
             target, n = _MeshTarget(V, F, verbose=False), len(V)
         print(f"{case}: {n} vertices, detail {detail(target):.2e}", flush=True)
 
