@@ -10,6 +10,8 @@ fit there, and their geometry is known in closed form away from the edges:
 * ``jack``: seven unit voxels, a centre and one on each side of it (a 3-D cross 3 wide), each
   exposed unit face a 16 x 16 grid (7,682 vertices). Convex and concave edges, and corners
   where three concave edges meet.
+* ``jack_coarse``: the jack with a 6 x 6 grid per unit face (1,082 vertices), the low end of
+  the vertex counts a user brings: a triangle along an edge is a sixth of the jack's arm.
 * ``cylinder``: radius 1, height 2.5, 96 segments round, 24 rows up the side, and caps of 15
   rings inside the rim, fanned into their centres (5,282 vertices): a flat cap meets the round
   side at a sharp rim, and the caps' triangles shrink to slivers at the centre.
@@ -23,11 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-CAD = ("cube", "jack", "cylinder")
+CAD = ("cube", "jack", "cylinder", "jack_coarse")
+_JACK = [(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1)]
 #: the polycubes: their voxels (unit cubes centred at integer points), grid per unit face, size
-POLYCUBES = {"cube": ([(0, 0, 0)], 32, 2.0),
-             "jack": ([(0, 0, 0), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1),
-                       (0, 0, -1)], 16, 1.0)}
+POLYCUBES = {"cube": ([(0, 0, 0)], 32, 2.0), "jack": (_JACK, 16, 1.0),
+             "jack_coarse": (_JACK, 6, 1.0)}
 
 
 def cad_mesh(name):

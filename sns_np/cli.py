@@ -39,6 +39,15 @@ def _positive_int(text):
     return v
 
 
+def _creases(text):
+    from .surface._targets import check_creases
+    try:
+        return check_creases(text if text in ("auto", "none") else float(text))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected auto, none or an angle in degrees in (0, 180], got {text!r}") from None
+
+
 def _positive_float(text):
     try:
         v = float(text)
@@ -60,6 +69,10 @@ def _add_fit_options(p):
     g.add_argument("--smooth", choices=MESH_SMOOTHING,
                    help=f"position targets on the Phong-tessellated mesh or on its flat "
                         f"triangles (default: {MESH_SMOOTHING[0]})")
+    g.add_argument("--creases", type=_creases, metavar="{auto,none,DEGREES}",
+                   help="keep the two sides of edges sharper than this many degrees apart in "
+                        "the target normals; auto (default): 60 on a mesh too coarse for its "
+                        "vertex normals to be followed across sharp edges, none otherwise")
 
 
 def _add_flow_options(p, options):
@@ -87,7 +100,7 @@ _FLOW_FLAGS = ("n_points", "refit_steps")
 
 
 def _fit_kwargs(args):
-    return given_arguments(args, FIT_FLAGS + ("smooth",))
+    return given_arguments(args, FIT_FLAGS + ("smooth", "creases"))
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -37,7 +37,8 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
-           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CHECKPOINT_STEPS",
+           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
+           "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
@@ -269,6 +270,15 @@ CHECKPOINT_SECONDS = 60.0
 #: position targets of a mesh fit (``fit_mesh(smooth=...)``), the default first: the
 #: Phong-tessellated mesh or its flat triangles
 MESH_SMOOTHING = ("phong", "none")
+
+#: creases of a mesh fit (``fit_mesh(creases=...)``): with "auto", a mesh whose Phong
+#: tessellation stands off its flat triangles by more than ``CREASE_GAP`` of the bounding-box
+#: diagonal on average (too coarse for its vertex normals to be followed across its sharp
+#: edges) keeps the two sides of every edge sharper than ``CREASE_ANGLE`` degrees apart;
+#: finer meshes interpolate their vertex normals everywhere (docs/fitting.md, "Meshes with
+#: sharp edges")
+CREASE_GAP = 1e-3
+CREASE_ANGLE = 60.0
 
 
 def _auto(name, unit=""):

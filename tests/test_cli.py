@@ -271,6 +271,8 @@ BAD = {
     "negative input scale": ("fit {d}/ellipsoid.obj -o {o}/m.npz --input-scale -2",
                              "--input-scale"),
     "model not .npz": ("fit {d}/ellipsoid.obj -o {o}/m.txt", "must end in"),
+    "creases not an angle": ("fit {d}/ellipsoid.obj -o {o}/m.npz --creases sharp", "--creases"),
+    "creases out of range": ("fit {d}/ellipsoid.obj -o {o}/m.npz --creases 270", "(0, 180]"),
     "no output folder": ("eval {d}/model.npz -o {o}/no/s.ply", "does not exist"),
     "checkpoint folder": ("fit {d}/ellipsoid.obj -o {o}/m.npz --checkpoint {o}/no/c.npz",
                           "does not exist"),

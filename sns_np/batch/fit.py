@@ -204,8 +204,8 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
         A progress bar over shapes on stderr, and the dashboard address.
     **fit_options
         Options of :func:`sns_np.surface.fit_mesh`: the fields of
-        :class:`~sns_np.surface.FitOptions` (steps, time_budget, width, depth, ...) and
-        ``smooth``.
+        :class:`~sns_np.surface.FitOptions` (steps, time_budget, width, depth, ...),
+        ``smooth`` and ``creases``.
 
     Returns
     -------
@@ -241,10 +241,13 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
         raise TypeError(f"fit_many sets {', '.join(reserved)} itself for every fit")
     from .._validation import check_choice
     from ..options import MESH_SMOOTHING, FitOptions
+    from ..surface._targets import check_creases
     # unknown names and bad values are refused here, before the cluster starts
-    FitOptions.split(fit_options, extra=_RUNTIME + ("smooth",))
+    FitOptions.split(fit_options, extra=_RUNTIME + ("smooth", "creases"))
     if fit_options.get("smooth") is not None:
         check_choice(fit_options["smooth"], "smooth", set(MESH_SMOOTHING))
+    if fit_options.get("creases") is not None:
+        check_creases(fit_options["creases"])
     threads = int(threads_per_fit)
     if threads < 1:
         raise ValueError(f"threads_per_fit must be >= 1, got {threads_per_fit}")

@@ -33,6 +33,7 @@ from .foldrepair import FoldRepair
 from .icosphere import icosphere
 from .io import LoadReport, MeshRepairWarning, load
 from .operators import (
+    corner_normals,
     cotan_laplacian,
     face_angles,
     face_areas,
@@ -57,7 +58,8 @@ __all__ = [
     "load", "LoadReport", "MeshRepairWarning", "write_mesh", "written_field_names", "check",
     "MeshSummary", "icosphere",
     # operators
-    "face_areas", "face_normals", "face_angles", "vertex_normals", "cotan_laplacian",
+    "face_areas", "face_normals", "face_angles", "vertex_normals", "corner_normals",
+    "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines
     "laplacian_eigenmodes", "eigenvalues", "baseline_curvatures", "discrete_curvatures",

@@ -20,10 +20,10 @@ from .._validation import as_generator, as_points, check_positive_int
 from ..errors import ShapeError
 from ._arrays import as_mesh
 from .errors import EmbeddingError
-from .operators import face_areas, vertex_normals
+from .operators import corner_normals, face_areas, vertex_normals
 from .spherical import SphereLocator, orientation_determinants
 
-__all__ = ["sample_surface", "uniform_barycentric", "Correspondence"]
+__all__ = ["sample_surface", "uniform_barycentric", "phong_offset", "Correspondence"]
 
 
 def uniform_barycentric(n: int, rng=None) -> np.ndarray:
@@ -96,6 +96,19 @@ def sample_surface(V, F, n: int, rng=None):
     return face, uniform_barycentric(n, g)
 
 
+def phong_offset(P, N, beta):
+    """The flat points ``q = sum_i beta_i P_i`` (k, 3) of triangles with corners ``P`` (k, 3, 3)
+    and corner normals ``N`` (k, 3, 3), and the offset (k, 3) that takes them to Phong
+    tessellation with shape factor 1: ``sum_i beta_i (pi_i(q) - q)``,
+    ``pi_i(q) = q - ((q - P_i) . N_i) N_i`` (:meth:`Correspondence.phong_point`)."""
+    q = beta[:, 0, None] * P[:, 0] + beta[:, 1, None] * P[:, 1] + beta[:, 2, None] * P[:, 2]
+    offset = np.zeros_like(q)
+    for i in range(3):
+        h = np.einsum("ij,ij->i", q - P[:, i], N[:, i])
+        offset -= (beta[:, i] * h)[:, None] * N[:, i]
+    return q, offset
+
+
 class Correspondence:
     """The continuous map between a mesh and its spherical embedding, both ways.
 
@@ -107,6 +120,10 @@ class Correspondence:
         ``det[a, b, c] > 0``), e.g. from :func:`sns_np.mesh.spherical_embedding`
     normals : {"angle", "area"}
         Weighting of the vertex normals that are interpolated to give smooth target normals.
+    crease_angle : float in (0, 180], optional
+        In degrees: interpolate each face's corner normals (:func:`~sns_np.mesh.
+        corner_normals`), which do not average across edges sharper than this, instead of
+        the vertex normals; ``None`` (default) interpolates the vertex normals everywhere.
 
     Attributes
     ----------
@@ -127,7 +144,7 @@ class Correspondence:
     True
     """
 
-    def __init__(self, V, F, Vs, *, normals: str = "angle"):
+    def __init__(self, V, F, Vs, *, normals: str = "angle", crease_angle=None):
         V, F = as_mesh(V, F)
         Vs = as_points(Vs, "Vs")
         if Vs.shape != V.shape:
@@ -144,12 +161,20 @@ class Correspondence:
                 f"e.g. face {int(bad[0])}; expected a fold-free embedding")
         self.V, self.F, self.Vs = V, F, Vs
         self.N = vertex_normals(V, F, weighting=normals)
+        self.crease_angle = None if crease_angle is None else float(crease_angle)
+        corners = corner_normals(V, F, crease_angle, weighting=normals)
+        # a vertex's own normal target: the corner normal of its first face (the vertex
+        # normal where no crease meets it)
+        used, first = np.unique(F.ravel(), return_index=True)
+        self.N_target = self.N.copy()
+        self.N_target[used] = corners.reshape(-1, 3)[first]
         A = face_areas(V, F)
         self.area = float(A.sum())
         self._cum = np.cumsum(A)
         # corners gathered once, [mesh | sphere | normal] side by side, so that a batch of
-        # samples costs one fancy-indexing pass: _corners[f, k] = (V, Vs, N)[F[f, k]]
-        self._corners = np.ascontiguousarray(np.concatenate([V[F], Vs[F], self.N[F]], axis=2))
+        # samples costs one fancy-indexing pass: _corners[f, k] = (V, Vs, N)[F[f, k]] (N the
+        # corner normal with a crease angle)
+        self._corners = np.ascontiguousarray(np.concatenate([V[F], Vs[F], corners], axis=2))
         self._locator = None
 
     @staticmethod
@@ -216,14 +241,8 @@ class Correspondence:
         True
         """
         C = self._corners[face]
-        q = (beta[:, 0, None] * C[:, 0, 0:3] + beta[:, 1, None] * C[:, 1, 0:3]
-             + beta[:, 2, None] * C[:, 2, 0:3])
-        corr = np.zeros_like(q)
-        for i in range(3):
-            n = C[:, i, 6:9]
-            h = np.einsum("ij,ij->i", q - C[:, i, 0:3], n)
-            corr -= (beta[:, i] * h)[:, None] * n
-        return q + alpha * corr
+        q, offset = phong_offset(C[:, :, 0:3], C[:, :, 6:9], beta)
+        return q + alpha * offset
 
     def sample_barycentric(self, n: int, rng=None):
         """Faces ``(n,)`` and barycentric coordinates ``(n, 3)`` of ``n`` points uniform by

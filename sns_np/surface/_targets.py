@@ -25,15 +25,18 @@ class _MeshTarget:
     #: how the sphere maps to the target (the automatic normal weight depends on it)
     parametrisation = "embedding"
 
-    def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong"):
+    def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong",
+                 crease_angle="none"):
         from .. import mesh
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
+        self.phong_gap = phong_gap(V, F)
+        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self.phong_gap)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
-        self.corr = mesh.Correspondence(V, F, Vs)
+        self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
         areas = mesh.face_areas(V, F)
         self.face_area = areas
         self.face_centroid = V[F].mean(axis=1)
@@ -62,10 +65,11 @@ class _MeshTarget:
 
     def sample_vertices(self, n, rng):
         """``n`` vertices drawn uniformly: ``(p, q, normals)`` at the vertices themselves,
-        where the mesh's positions are exact (between them they are interpolated)."""
+        where the mesh's positions are exact (between them they are interpolated); the
+        normal of a vertex on a crease is that of its first face's side."""
         i = rng.integers(0, len(self.corr.V), n)
         return (self.corr.Vs[i], (self.corr.V[i] - self.center) / self.scale,
-                self.corr.N[i])
+                self.corr.N_target[i])
 
     def _points(self, face, beta):
         """``(p, q, normals)`` of the points ``beta`` of faces ``face``."""
@@ -132,6 +136,53 @@ class _ShapeTarget:
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
         return ((y - self.center) / self.scale, nrm, JR / self.scale,
                 None if S2 is None else S2 / self.scale)
+
+
+def check_creases(creases):
+    """``creases`` of :func:`~sns_np.surface.fit_mesh` checked: "auto", "none" or an angle in
+    degrees in (0, 180]; raises ValueError naming what was expected."""
+    if isinstance(creases, str):
+        if creases in ("auto", "none"):
+            return creases
+    elif isinstance(creases, (int, float, np.integer, np.floating)) and not isinstance(
+            creases, bool) and 0.0 < float(creases) <= 180.0:
+        return float(creases)
+    raise ValueError(f"creases must be 'auto', 'none' or an angle in degrees in (0, 180], "
+                     f"got {creases!r}")
+
+
+def _crease_choice(creases, gap):
+    """The crease angle (degrees, or None for none) and why."""
+    from ..options import CREASE_ANGLE, CREASE_GAP
+    creases = check_creases(creases)
+    if creases == "none":
+        return None, "given: the vertex normals interpolated everywhere"
+    if creases != "auto":
+        return creases, "given"
+    if gap > CREASE_GAP:
+        return CREASE_ANGLE, (
+            f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal off its "
+            f"triangles, > {CREASE_GAP:g}), whose vertex normals would round its sharp "
+            f"edges off over a triangle's width")
+    return None, (f"none: the Phong tessellation stands {gap:.2e} of the diagonal off the "
+                  f"triangles (<= {CREASE_GAP:g}), the vertex normals interpolated everywhere")
+
+
+def phong_gap(V, F, n=20000):
+    """How far the Phong tessellation of a mesh (shape factor 0.75, the fit's position
+    targets) stands off its flat triangles: the mean distance at ``n`` points uniform by
+    area (seeded), relative to the bounding-box diagonal. About the chordal error of the
+    triangles where the mesh samples a smooth surface; at a sharp edge, how far a surface
+    that follows the vertex normals across it rounds it off."""
+    from ..mesh import sample_surface, vertex_normals
+    from ..mesh.correspondence import phong_offset
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F)
+    face, beta = sample_surface(V, F, n, rng=0)
+    N = vertex_normals(V, F)
+    _, offset = phong_offset(V[F[face]], N[F[face]], beta)
+    diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    return float(0.75 * np.linalg.norm(offset, axis=1).mean() / diagonal)
 
 
 def _fingerprint(V, F):

@@ -61,7 +61,7 @@ from ._plan import (
     detail,
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
-from ._targets import _MeshTarget, _ShapeTarget
+from ._targets import _MeshTarget, _ShapeTarget, check_creases
 from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
@@ -193,7 +193,8 @@ class FitReport:
 
 # ------------------------------------------------------------------------------ public API
 
-def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
+def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="auto",
+             **options):
     """Fit a SphericalNeuralSurface to a closed genus-0 triangle mesh.
 
     Parameters
@@ -208,6 +209,14 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
     smooth : {"phong", "none"}
         Position targets on the Phong-tessellated mesh (default: the mesh's vertex normals
         bend each triangle like the surface it samples) or on the flat triangles.
+    creases : "auto", "none" or float
+        Edges along which the target normals are not averaged: with an angle in degrees, the
+        two sides of every edge whose faces turn by more than it keep their own normals
+        (:func:`sns_np.mesh.corner_normals`), so the fit may keep the edge sharp. "auto"
+        (default): ``CREASE_ANGLE`` (60) on a mesh too coarse for its vertex normals to be
+        followed across its sharp edges (its Phong tessellation more than ``CREASE_GAP``,
+        1e-3 of the diagonal, off its triangles), none otherwise; recorded in the model's
+        metadata. docs/fitting.md, "Meshes with sharp edges".
     **options
         The fitting options (:class:`FitOptions`: steps, batch, lr, time_budget, ...) and
         those of :func:`fit_sampler` (checkpoint, progress, ...).
@@ -227,15 +236,17 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], **options):
     ((1, 3), 30, 'phong')
     """
     check_choice(smooth, "smooth", set(MESH_SMOOTHING))
+    check_creases(creases)
     _check_early(options)
     for name in DERIVATIVE_WEIGHTS:             # before the embedding, not after it
         if options.get(name):
             raise ValueError(NO_JACOBIAN.format(name, options[name]))
     t0 = time.perf_counter()
     target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
-                         smooth=smooth)
+                         smooth=smooth, crease_angle=creases)
     meta = {"source": options.pop("source", "mesh"), "n_vertices": int(len(V)),
-            "n_faces": int(len(F)), "area": target.area, "smooth": smooth}
+            "n_faces": int(len(F)), "area": target.area, "smooth": smooth,
+            "crease_angle": target.crease_angle}
     return fit_sampler(target, metadata=meta, elapsed_before=time.perf_counter() - t0,
                        **options)
 
@@ -445,6 +456,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     _check_checkpoint_options(checkpoint, checkpoint_every, checkpoint_seconds)
     t_dtype = np.dtype(o["dtype"])
     choices = _plan(target, o, net, elapsed=elapsed_before)     # fills in the "auto" options
+    if getattr(target, "crease_why", None):                     # fit_mesh's creases
+        choices["creases"] = {"value": target.crease_angle, "why": target.crease_why}
     rng = as_generator(o["seed"])
     key = _resume_key(target, FitOptions(**o), net)
     with contextlib.ExitStack() as hold:
