@@ -121,3 +121,14 @@ def test_fit_mesh_refuses_bad_creases_before_the_embedding(bad, monkeypatch):
     monkeypatch.setattr(mesh, "spherical_embedding", no_embedding)
     with pytest.raises(ValueError, match="creases must be 'auto', 'none' or an angle"):
         _tiny(*jack(2), creases=bad)
+
+
+def test_a_checkpoint_knows_the_targets_it_was_made_with():
+    from sns_np.surface._targets import _fingerprint, _MeshTarget
+    V, F = cube(2)
+    Vs = V / np.linalg.norm(V, axis=1, keepdims=True)
+    plain = _MeshTarget(V, F, Vs, verbose=False)
+    creased = _MeshTarget(V, F, Vs, verbose=False, crease_angle=60.0)
+    flat = _MeshTarget(V, F, Vs, verbose=False, smooth="none")
+    assert plain.fingerprint == _fingerprint(V, F)          # the checkpoints made before
+    assert len({plain.fingerprint, creased.fingerprint, flat.fingerprint}) == 3

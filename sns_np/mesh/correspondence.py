@@ -100,7 +100,15 @@ def phong_offset(P, N, beta):
     """The flat points ``q = sum_i beta_i P_i`` (k, 3) of triangles with corners ``P`` (k, 3, 3)
     and corner normals ``N`` (k, 3, 3), and the offset (k, 3) that takes them to Phong
     tessellation with shape factor 1: ``sum_i beta_i (pi_i(q) - q)``,
-    ``pi_i(q) = q - ((q - P_i) . N_i) N_i`` (:meth:`Correspondence.phong_point`)."""
+    ``pi_i(q) = q - ((q - P_i) . N_i) N_i`` (:meth:`Correspondence.phong_point`).
+
+    Examples
+    --------
+    >>> P = np.array([[[1.0, 0, 0], [0, 1, 0], [0, 0, 1]]])      # a corner of the octahedron
+    >>> q, offset = phong_offset(P, P, np.full((1, 3), 1 / 3))    # normals radial
+    >>> bool(np.linalg.norm(q + offset) > np.linalg.norm(q))      # lifted towards the sphere
+    True
+    """
     q = beta[:, 0, None] * P[:, 0] + beta[:, 1, None] * P[:, 1] + beta[:, 2, None] * P[:, 2]
     offset = np.zeros_like(q)
     for i in range(3):
@@ -129,6 +137,12 @@ class Correspondence:
     ----------
     area : float
         Surface area of the mesh.
+    N : (n, 3) float array
+        The unit vertex normals.
+    N_target : (n, 3) float array
+        The normal a sample at a vertex itself takes: the vertex normal, or with a crease
+        angle the corner normal of the vertex's first face (a vertex on a crease has one
+        per side).
 
     Examples
     --------

@@ -46,6 +46,8 @@ class _MeshTarget:
         self.mean_face_area = 4 * np.pi / len(F)     # normalised units (total 4 pi)
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
+        if smooth != "phong" or self.crease_angle is not None:    # other targets, same mesh
+            self.fingerprint += f":{smooth}:creases={self.crease_angle}"
         self.smooth = smooth
         self._nearest = None            # the ClosestPoint search, built on first use
 
