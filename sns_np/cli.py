@@ -40,7 +40,7 @@ def _positive_int(text):
 
 
 def _creases(text):
-    from .surface._targets import check_creases
+    from .options import check_creases
     try:
         return check_creases(text if text in ("auto", "none") else float(text))
     except ValueError:

@@ -38,6 +38,7 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
            "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
+           "check_creases",
            "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
@@ -279,6 +280,25 @@ MESH_SMOOTHING = ("phong", "none")
 #: sharp edges")
 CREASE_GAP = 1e-3
 CREASE_ANGLE = 60.0
+
+
+def check_creases(creases):
+    """``creases`` of :func:`~sns_np.surface.fit_mesh` checked: "auto", "none" or an angle in
+    degrees in (0, 180] (returned as a float); raises ValueError naming what was expected.
+
+    Examples
+    --------
+    >>> check_creases("auto"), check_creases(45)
+    ('auto', 45.0)
+    """
+    if isinstance(creases, str):
+        if creases in ("auto", "none"):
+            return creases
+    elif isinstance(creases, numbers.Real) and not isinstance(creases, bool) and \
+            0.0 < float(creases) <= 180.0:
+        return float(creases)
+    raise ValueError(f"creases must be 'auto', 'none' or an angle in degrees in (0, 180], "
+                     f"got {creases!r}")
 
 
 def _auto(name, unit=""):

@@ -240,8 +240,7 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     if reserved:
         raise TypeError(f"fit_many sets {', '.join(reserved)} itself for every fit")
     from .._validation import check_choice
-    from ..options import MESH_SMOOTHING, FitOptions
-    from ..surface._targets import check_creases
+    from ..options import MESH_SMOOTHING, FitOptions, check_creases
     # unknown names and bad values are refused here, before the cluster starts
     FitOptions.split(fit_options, extra=_RUNTIME + ("smooth", "creases"))
     if fit_options.get("smooth") is not None:

@@ -140,22 +140,9 @@ class _ShapeTarget:
                 None if S2 is None else S2 / self.scale)
 
 
-def check_creases(creases):
-    """``creases`` of :func:`~sns_np.surface.fit_mesh` checked: "auto", "none" or an angle in
-    degrees in (0, 180]; raises ValueError naming what was expected."""
-    if isinstance(creases, str):
-        if creases in ("auto", "none"):
-            return creases
-    elif isinstance(creases, (int, float, np.integer, np.floating)) and not isinstance(
-            creases, bool) and 0.0 < float(creases) <= 180.0:
-        return float(creases)
-    raise ValueError(f"creases must be 'auto', 'none' or an angle in degrees in (0, 180], "
-                     f"got {creases!r}")
-
-
 def _crease_choice(creases, gap):
     """The crease angle (degrees, or None for none) and why."""
-    from ..options import CREASE_ANGLE, CREASE_GAP
+    from ..options import CREASE_ANGLE, CREASE_GAP, check_creases
     creases = check_creases(creases)
     if creases == "none":
         return None, "given: the vertex normals interpolated everywhere"

@@ -40,6 +40,7 @@ from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constan
     DETAIL_RANGE,
     MESH_SMOOTHING,
     FitOptions,
+    check_creases,
 )
 from ..sampling import uniform_sphere
 from ._adaptive import ErrorSampler
@@ -61,7 +62,7 @@ from ._plan import (
     detail,
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
-from ._targets import _MeshTarget, _ShapeTarget, check_creases
+from ._targets import _MeshTarget, _ShapeTarget
 from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position_normal_loss
 from .model import SphericalNeuralSurface
 
