@@ -77,6 +77,7 @@ from cad_shapes import CAD, cad_mesh, exact_away_from_edges  # noqa: E402
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
 from sns_np.mesh import check, load, sample_surface, spherical_embedding  # noqa: E402
 from sns_np.mesh.operators import vertex_normals  # noqa: E402
+from sns_np.options import check_creases  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
 from sns_np.sampling import uniform_sphere  # noqa: E402
 from sns_np.surface import fit_mesh, fit_shape  # noqa: E402
@@ -486,7 +487,8 @@ def main(argv=None):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])
-    ap.add_argument("--creases", type=lambda t: t if t in ("auto", "none") else float(t),
+    ap.add_argument("--creases", type=lambda t: check_creases(
+                        t if t in ("auto", "none") else float(t)),
                     help="auto, none or an angle in degrees (fit_mesh's creases)")
     ap.add_argument("--sampling", choices=["area", "error"])
     ap.add_argument("--optimizer", choices=["adam", "rmsprop", "sgd", "soap"])

@@ -32,7 +32,8 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        self.phong_gap = phong_gap(V, F)
+        # the gap is measured only where "auto" needs it
+        self.phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
         self.crease_angle, self.crease_why = _crease_choice(crease_angle, self.phong_gap)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
@@ -141,7 +142,8 @@ class _ShapeTarget:
 
 
 def _crease_choice(creases, gap):
-    """The crease angle (degrees, or None for none) and why."""
+    """The crease angle (degrees, or None for none) and why; ``gap`` (the mesh's
+    :func:`phong_gap`) is read for "auto" only."""
     from ..options import CREASE_ANGLE, CREASE_GAP, check_creases
     creases = check_creases(creases)
     if creases == "none":
