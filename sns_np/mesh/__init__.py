@@ -35,6 +35,7 @@ from .io import LoadReport, MeshRepairWarning, load
 from .operators import (
     corner_normals,
     cotan_laplacian,
+    edge_turning_angles,
     face_angles,
     face_areas,
     face_normals,
@@ -59,6 +60,7 @@ __all__ = [
     "MeshSummary", "icosphere",
     # operators
     "face_areas", "face_normals", "face_angles", "vertex_normals", "corner_normals",
+    "edge_turning_angles",
     "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines
