@@ -38,7 +38,6 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
            "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
-           "CREASE_SHARE", "CREASE_FLAT",
            "check_creases",
            "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
@@ -278,15 +277,9 @@ MESH_SMOOTHING = ("phong", "none")
 #: diagonal on average (too coarse for its vertex normals to be followed across its sharp
 #: edges) keeps the two sides of every edge sharper than ``CREASE_ANGLE`` degrees apart;
 #: finer meshes interpolate their vertex normals everywhere (docs/fitting.md, "Meshes with
-#: sharp edges"). Creases are lines: a coarse mesh whose edges turn by more than
-#: ``CREASE_ANGLE`` nearly everywhere (more than ``CREASE_SHARE`` of them) on a curved surface
-#: (its other edges turning by more than ``CREASE_FLAT`` degrees on average) has none to keep,
-#: and keeps its vertex normals too; a coarse polyhedron (flat between its sharp edges) keeps
-#: its creases however many they are
+#: sharp edges")
 CREASE_GAP = 1e-3
 CREASE_ANGLE = 60.0
-CREASE_SHARE = 0.15
-CREASE_FLAT = 5.0
 
 
 def check_creases(creases):

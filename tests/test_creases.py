@@ -7,18 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sns_np.mesh import (
-    Correspondence,
-    corner_normals,
-    edge_turning_angles,
-    face_normals,
-    icosphere,
-    vertex_normals,
-)
-from sns_np.options import CREASE_ANGLE, CREASE_FLAT, CREASE_GAP, CREASE_SHARE
-from sns_np.shapes import Flower
+from sns_np.mesh import Correspondence, corner_normals, face_normals, icosphere, vertex_normals
+from sns_np.options import CREASE_ANGLE, CREASE_GAP
 from sns_np.surface import fit_mesh
-from sns_np.surface._targets import _crease_choice, phong_gap
+from sns_np.surface._targets import phong_gap
 
 _spec = importlib.util.spec_from_file_location(
     "cad_shapes", Path(__file__).resolve().parents[1] / "benchmarks" / "cad_shapes.py")
@@ -102,39 +94,6 @@ def test_phong_gap_is_the_chordal_error_on_smooth_meshes_and_grows_at_coarse_edg
     assert 3.5 < c[0] / c[1] < 4.5 and 3.5 < c[1] / c[2] < 4.5
     # the "auto" rule: the coarse jack creases, the fine one does not
     assert phong_gap(*jack(6)) > CREASE_GAP > phong_gap(*jack(16))
-
-
-def test_edge_turning_angles_of_polyhedra_and_a_fine_sphere():
-    V, F = cube(3)
-    turn = edge_turning_angles(V, F)
-    assert len(turn) == 3 * len(F) // 2                  # every edge of a closed mesh, once
-    # 12 x 3 edge segments at 90 degrees, the rest (grid lines and diagonals) flat
-    assert np.sum(np.isclose(turn, 90.0, atol=1e-9)) == 36
-    assert np.allclose(np.sort(turn)[:-36], 0.0, atol=1e-6)
-    # the icosahedron's dihedral angle is arccos(-sqrt(5)/3): its normals turn by the rest
-    turn = edge_turning_angles(*icosphere(0))
-    assert np.allclose(turn, 180.0 - np.degrees(np.arccos(-np.sqrt(5) / 3)), atol=1e-9)
-    # on a fine sphere the normals turn by about the edge's angle at the centre
-    V, F = icosphere(4)
-    assert edge_turning_angles(V, F).max() < 5.0
-
-
-def test_auto_creases_keep_lines_not_a_mesh_sharp_everywhere():
-    # a coarse polyhedron keeps its creases however many of its edges they are
-    V, F = jack(2)
-    share = np.mean(edge_turning_angles(V, F) > CREASE_ANGLE)
-    assert share > CREASE_SHARE
-    assert _crease_choice("auto", phong_gap(V, F), V, F)[0] == CREASE_ANGLE
-    # FLOWER meshed at 642 vertices is as coarse but curved between its sharp edges: none
-    V, F = icosphere(3)
-    V = Flower()(V)
-    turn = edge_turning_angles(V, F)
-    assert phong_gap(V, F) > CREASE_GAP and np.mean(turn > CREASE_ANGLE) > CREASE_SHARE
-    assert turn[turn <= CREASE_ANGLE].mean() > CREASE_FLAT
-    angle, why = _crease_choice("auto", phong_gap(V, F), V, F)
-    assert angle is None and "no lines of sharp edges" in why
-    # given angles are taken as they are
-    assert _crease_choice(45, None, V, F) == (45.0, "given")
 
 
 def _tiny(V, F, **kw):

@@ -35,7 +35,6 @@ from .io import LoadReport, MeshRepairWarning, load
 from .operators import (
     corner_normals,
     cotan_laplacian,
-    edge_turning_angles,
     face_angles,
     face_areas,
     face_normals,
@@ -60,7 +59,6 @@ __all__ = [
     "MeshSummary", "icosphere",
     # operators
     "face_areas", "face_normals", "face_angles", "vertex_normals", "corner_normals",
-    "edge_turning_angles",
     "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines

@@ -12,7 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._validation import check_choice
-from ._arrays import as_mesh, unique_edges
+from ._arrays import as_mesh
 
 __all__ = [
     "face_areas",
@@ -20,7 +20,6 @@ __all__ = [
     "face_angles",
     "vertex_normals",
     "corner_normals",
-    "edge_turning_angles",
     "cotan_laplacian",
     "mass_matrix",
     "surface_area",
@@ -250,38 +249,6 @@ def corner_normals(V, F, crease_angle: float | None = None,
     N = np.empty((F.size, 3))
     N[order] = acc
     return N.reshape(F.shape[0], 3, 3)
-
-
-def edge_turning_angles(V, F) -> np.ndarray:
-    """How far the surface turns across every edge: the angle between the normals of the
-    edge's two faces, in degrees (0 where they are coplanar, 90 along a cube's edges).
-
-    Parameters
-    ----------
-    V : (n, 3) float array
-    F : (m, 3) int array, consistently oriented
-
-    Returns
-    -------
-    turn : (e,) float array, one angle per edge with exactly two faces (an edge on a
-        boundary, or shared by more than two faces, has none), in the order of the sorted
-        undirected edges
-
-    Examples
-    --------
-    >>> from sns_np.mesh import icosphere
-    >>> T = np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]])
-    >>> G = np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]])    # a tetrahedron
-    >>> edge_turning_angles(T, G).round(2)
-    array([109.47, 109.47, 109.47, 109.47, 109.47, 109.47])
-    """
-    V, F = as_mesh(V, F)
-    _, h2e, count = unique_edges(F, len(V))
-    order = np.argsort(h2e, kind="stable")           # the halfedges of each edge together
-    first = np.r_[0, np.cumsum(count)[:-1]][count == 2]
-    Nf = face_normals(V, F)
-    cos = np.einsum("ij,ij->i", Nf[order[first] // 3], Nf[order[first + 1] // 3])
-    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
 
 def _cotangents(V, F):

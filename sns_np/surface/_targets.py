@@ -34,8 +34,7 @@ class _MeshTarget:
             mesh.check(V, F)
         # the gap is measured only where "auto" needs it
         self.phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
-        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self.phong_gap,
-                                                             V, F)
+        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self.phong_gap)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -142,38 +141,22 @@ class _ShapeTarget:
                 None if S2 is None else S2 / self.scale)
 
 
-def _crease_choice(creases, gap, V=None, F=None):
+def _crease_choice(creases, gap):
     """The crease angle (degrees, or None for none) and why; ``gap`` (the mesh's
-    :func:`phong_gap`) is read for "auto" only, the mesh ``V, F`` where the gap is over
-    ``CREASE_GAP``."""
-    from ..mesh import edge_turning_angles
-    from ..options import CREASE_ANGLE, CREASE_FLAT, CREASE_GAP, CREASE_SHARE, check_creases
+    :func:`phong_gap`) is read for "auto" only."""
+    from ..options import CREASE_ANGLE, CREASE_GAP, check_creases
     creases = check_creases(creases)
     if creases == "none":
         return None, "given: the vertex normals interpolated everywhere"
     if creases != "auto":
         return creases, "given"
-    if gap <= CREASE_GAP:
-        return None, (f"none: the Phong tessellation stands {gap:.2e} of the diagonal off "
-                      f"the triangles (<= {CREASE_GAP:g}), the vertex normals interpolated "
-                      f"everywhere")
-    coarse = (f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal off "
-              f"its triangles, > {CREASE_GAP:g})")
-    turn = edge_turning_angles(V, F)
-    sharp = turn > CREASE_ANGLE
-    share = float(sharp.mean()) if len(turn) else 0.0
-    between = float(turn[~sharp].mean()) if (~sharp).any() else 0.0
-    if share > CREASE_SHARE and between > CREASE_FLAT:
-        return None, (
-            f"none: {coarse} whose edges turn by more than {CREASE_ANGLE:g} deg nearly "
-            f"everywhere ({share:.0%} of them, > {CREASE_SHARE:.0%}) on a curved surface (the "
-            f"others by {between:.1f} deg on average, > {CREASE_FLAT:g}): no lines of sharp "
-            f"edges to keep, the vertex normals interpolated everywhere")
-    return CREASE_ANGLE, (
-        f"{coarse}, whose vertex normals would round its sharp edges off over a triangle's "
-        f"width ({share:.1%} of its edges turn by more than {CREASE_ANGLE:g} deg"
-        + (f"; the faces between them are flat, {between:.1f} deg" if share > CREASE_SHARE
-           else "") + ")")
+    if gap > CREASE_GAP:
+        return CREASE_ANGLE, (
+            f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal off its "
+            f"triangles, > {CREASE_GAP:g}), whose vertex normals would round its sharp "
+            f"edges off over a triangle's width")
+    return None, (f"none: the Phong tessellation stands {gap:.2e} of the diagonal off the "
+                  f"triangles (<= {CREASE_GAP:g}), the vertex normals interpolated everywhere")
 
 
 def phong_gap(V, F, n=20000):
