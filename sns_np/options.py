@@ -38,6 +38,7 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
            "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
+           "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL",
            "check_creases",
            "CHECKPOINT_STEPS",
            "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
@@ -281,6 +282,17 @@ MESH_SMOOTHING = ("phong", "none")
 CREASE_GAP = 1e-3
 CREASE_ANGLE = 60.0
 
+#: a mesh as coarse as ``CREASE_GAP`` says (its Phong tessellation more than that off its
+#: triangles) is fitted to its vertices more than to its interpolated targets: that share
+#: of each batch is drawn at its vertices, where its positions are exact, and the normal
+#: weight of the nearest-point phase is ``COARSE_CLOSEST_NORMAL`` (its interpolated normals
+#: are guesses no surface through its vertices follows). Measured on spot qslim-ed to 1,000
+#: vertices at 540 s (docs/fitting.md, "Coarse meshes"): distance to the mesh 7.96e-4 of
+#: the diagonal against 1.57e-3, and against the fine spot 7.9e-4 / 1.95 deg against
+#: 1.60e-3 / 2.40. A finer mesh samples its faces only
+COARSE_VERTEX_FRACTION = 0.25
+COARSE_CLOSEST_NORMAL = 0.01
+
 
 def check_creases(creases):
     """``creases`` of :func:`~sns_np.surface.fit_mesh` checked: "auto", "none" or an angle in
@@ -360,9 +372,10 @@ class FitOptions(Options):
         None, f"how training points are drawn: uniformly by area, or weighted by the recent "
         f"error with importance weights, the same objective (a mesh only; default: "
         f"{_auto('sampling')})", Choice(*SAMPLINGS), resume=True)
-    vertex_fraction: float = option(
-        0.0, "share of each batch drawn at the mesh's vertices, whose positions are the "
-        "mesh's only exact data (a mesh only)", Fraction(), resume=True)
+    vertex_fraction: float | None = option(
+        None, "share of each batch drawn at the mesh's vertices, whose positions are the "
+        f"mesh's only exact data (a mesh only; default: {COARSE_VERTEX_FRACTION:g} on a "
+        f"coarse mesh, 0 otherwise)", Fraction(), resume=True)
     normal_weight: float | None = option(
         None, f"weight of the normal loss (default: {NORMAL_WEIGHT['embedding']:g} for a mesh, "
         f"{NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is exact)",
@@ -392,7 +405,8 @@ class FitOptions(Options):
     closest_normal_weight: float | None = option(
         None, f"weight of the normal loss while targets are the nearest mesh points "
         f"(default: {CLOSEST_NORMAL_AREA:g} x the mean face area in normalised units, at most "
-        f"{CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its positions)",
+        f"{CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its positions; "
+        f"{COARSE_CLOSEST_NORMAL:g} on a coarse mesh, whose interpolated normals are guesses)",
         Real(allow_zero=True), resume=True)
     anchor_weight: float = option(
         1.0, "weight of the correspondence's position error while targets are the nearest "

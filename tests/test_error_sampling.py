@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from sns_np.errors import ModelFileError
-from sns_np.options import AUTO
+from sns_np.options import AUTO, CLOSEST_NORMAL_AREA, CLOSEST_NORMAL_MAX, COARSE_CLOSEST_NORMAL
 from sns_np.shapes import Bobble, Ellipsoid
 from sns_np.surface import fit_mesh, fit_shape, position_normal_loss
 from sns_np.surface._adaptive import ErrorSampler, face_cells
@@ -181,9 +181,20 @@ def test_a_fit_draws_its_share_of_vertices(monkeypatch):
     drawn.clear()
     fit_mesh(V, F, steps=2, sampling="error", vertex_fraction=1.0, **TINY)
     assert drawn == [256] * 2                                # no face samples at all
+    # the default: half the batch at the vertices of a coarse mesh (level 2: its Phong
+    # tessellation stands more than CREASE_GAP off its triangles), none on a finer one
     drawn.clear()
-    fit_mesh(V, F, steps=2, **TINY)
-    assert drawn == []                                       # the default: faces only
+    _, r = fit_mesh(V, F, steps=2, **TINY)
+    assert drawn == [128] * 2 and r.choices["vertex_fraction"]["value"] == 0.5
+    assert "a coarse mesh" in r.choices["vertex_fraction"]["why"]
+    # and its nearest-point phase leans on positions: its interpolated normals are guesses
+    assert r.options["closest_normal_weight"] == COARSE_CLOSEST_NORMAL
+    drawn.clear()
+    _, r = fit_mesh(*Ellipsoid(1.0, 1.3, 0.7).mesh(4), steps=2, **TINY)
+    assert drawn == [] and r.options["vertex_fraction"] == 0.0
+    assert "a fine mesh" in r.choices["vertex_fraction"]["why"]
+    assert r.options["closest_normal_weight"] == min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * 4
+                                                     * np.pi / 5120)    # level 4: 5,120 faces
 
 
 def test_vertex_fraction_refusals():

@@ -14,6 +14,9 @@ from ..options import (
     AUTO,
     CLOSEST_NORMAL_AREA,
     CLOSEST_NORMAL_MAX,
+    COARSE_CLOSEST_NORMAL,
+    COARSE_VERTEX_FRACTION,
+    CREASE_GAP,
     DETAIL_RANGE,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
@@ -116,6 +119,31 @@ DERIVATIVE_WEIGHTS = {"jacobian_weight": (JACOBIAN_WEIGHT, "derivatives"),
                       "hessian_weight": (HESSIAN_WEIGHT, "second derivatives")}
 
 
+def _coarse(target):
+    """``(gap, why)`` for a mesh whose Phong tessellation stands more than ``CREASE_GAP`` off
+    its triangles (a coarse mesh), else ``(None, why)``; ``why`` None for no mesh."""
+    gap = getattr(target, "phong_gap", None) if hasattr(target, "sample_vertices") else None
+    if gap is None:
+        return None, None
+    if gap > CREASE_GAP:
+        return gap, (f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal "
+                     f"off its triangles, > {CREASE_GAP:g})")
+    return None, (f"a fine mesh (its Phong tessellation stands {gap:.2e} of the diagonal off "
+                  f"its triangles, <= {CREASE_GAP:g})")
+
+
+def _vertex_fraction(target):
+    """The share of each batch drawn at the vertices, and why: ``COARSE_VERTEX_FRACTION`` on a
+    coarse mesh, 0 otherwise."""
+    gap, kind = _coarse(target)
+    if kind is None:
+        return 0.0, "no vertices: the target draws its own points (an analytic map)"
+    if gap is not None:
+        return COARSE_VERTEX_FRACTION, (f"{kind}: between its vertices the targets are "
+                                        f"interpolated, at them exact")
+    return 0.0, f"{kind}: its faces only"
+
+
 def _plan(target, o, net, elapsed=0.0):
     """Fill the options left to "auto" (None) from the target's detail; returns the choices
     made (option -> {"value", "why"})."""
@@ -128,6 +156,9 @@ def _plan(target, o, net, elapsed=0.0):
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
+    if o["vertex_fraction"] is None:
+        o["vertex_fraction"], why = _vertex_fraction(target)
+        choices["vertex_fraction"] = {"value": o["vertex_fraction"], "why": why}
     nearest = hasattr(target, "closest")      # targets at the nearest mesh point
     if o["closest_after"] is not None and o["closest_after"] < 1.0 and not nearest:
         raise ValueError(f"closest_after={o['closest_after']:g} needs a mesh target "
@@ -140,7 +171,14 @@ def _plan(target, o, net, elapsed=0.0):
             "parametrisation" if nearest else "no mesh: the targets are the map's own"}
     if o["closest_normal_weight"] is None:
         a = getattr(target, "mean_face_area", None)
-        if nearest and a is not None:
+        gap, kind = _coarse(target) if nearest else (None, None)
+        if gap is not None:
+            o["closest_normal_weight"] = COARSE_CLOSEST_NORMAL
+            choices["closest_normal_weight"] = {
+                "value": COARSE_CLOSEST_NORMAL,
+                "why": f"{kind}: its interpolated normals are guesses that no surface through "
+                       f"its vertices follows; the positions lead"}
+        elif nearest and a is not None:
             o["closest_normal_weight"] = min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * a)
             choices["closest_normal_weight"] = {
                 "value": o["closest_normal_weight"],

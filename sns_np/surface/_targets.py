@@ -33,8 +33,8 @@ class _MeshTarget:
         if check:
             mesh.check(V, F)
         # the gap is measured only where "auto" needs it
-        self.phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
-        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self.phong_gap)
+        self._phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
+        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self._phong_gap)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -51,6 +51,13 @@ class _MeshTarget:
             self.fingerprint += f":{smooth}:creases={self.crease_angle}"
         self.smooth = smooth
         self._nearest = None            # the ClosestPoint search, built on first use
+
+    @property
+    def phong_gap(self):
+        """The mesh's :func:`phong_gap`, measured on first use: how coarse it is."""
+        if self._phong_gap is None:
+            self._phong_gap = phong_gap(self.corr.V, self.corr.F)
+        return self._phong_gap
 
     def _targets(self, face, beta):
         q, nrm = self.corr.to_mesh(face, beta)

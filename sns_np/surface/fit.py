@@ -373,7 +373,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         the rest as ``sampling`` says. A mesh's vertices are its only exact data: between
         them positions and normals are interpolated, and a mesh of a smooth surface carries
         the interpolation's error into its targets (docs/fitting.md, "The mesh's vertices").
-        0 (default) draws on the faces only; a mesh only.
+        0 draws on the faces only; a mesh only. Default: ``COARSE_VERTEX_FRACTION`` (0.5) on
+        a coarse mesh (its Phong tessellation more than ``CREASE_GAP``, 1e-3 of the
+        diagonal, off its triangles), 0 on a finer one and on an analytic map.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md).
