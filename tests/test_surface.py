@@ -8,6 +8,7 @@ from sns_np.nn import ResidualMLP
 from sns_np.options import (
     CLOSEST_NORMAL_AREA,
     CLOSEST_NORMAL_MAX,
+    COARSE_CLOSEST_NORMAL,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
     NORMAL_WEIGHT,
@@ -453,17 +454,21 @@ def test_closest_phase_is_a_mesh_option_and_is_recorded():
 
 
 def test_closest_normal_weight_follows_the_mean_face_area():
-    # 50 x the mean face area in normalised units (total 4 pi), at most 0.1: a mesh of 320
-    # faces is coarse enough for the cap, one of 20,480 is not
+    # 50 x the mean face area in normalised units (total 4 pi), at most 0.1: a mesh of 5,120
+    # faces is coarse enough for the cap, one of 20,480 is not; a mesh of 320 faces is coarse
+    # by its Phong gap (> CREASE_GAP) and leans on its positions
     E = Ellipsoid(1.0, 1.3, 0.7)
-    for level in (2, 5):
+    for level in (2, 4, 5):
         V, F = E.mesh(level)
         Vs = V / np.linalg.norm(V, axis=1, keepdims=True)      # a radial mesh's embedding
         _, r = fit_mesh(V, F, Vs=Vs, steps=1, **TINY)
         want = min(CLOSEST_NORMAL_MAX, CLOSEST_NORMAL_AREA * 4 * np.pi / len(F))
+        if level == 2:
+            want = COARSE_CLOSEST_NORMAL
+            assert "a coarse mesh" in r.choices["closest_normal_weight"]["why"]
         assert r.options["closest_normal_weight"] == pytest.approx(want)
         assert r.choices["closest_normal_weight"]["value"] == pytest.approx(want)
-        assert (want == CLOSEST_NORMAL_MAX) == (level == 2)
+        assert (want == CLOSEST_NORMAL_MAX) == (level == 4)
         if level == 5:
             assert want == pytest.approx(50 * 4 * np.pi / 20480)   # 0.0307
     _, r = fit_mesh(V, F, Vs=Vs, steps=1, closest_normal_weight=0.5, **TINY)
