@@ -32,7 +32,8 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        # the gap is measured only where "auto" needs it
+        # the gap (how coarse the mesh is) is measured here for "auto" creases, else on first
+        # use (the automatic vertex_fraction and closest_normal_weight)
         self._phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
         self.crease_angle, self.crease_why = _crease_choice(crease_angle, self._phong_gap)
         if Vs is None:

@@ -373,7 +373,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         the rest as ``sampling`` says. A mesh's vertices are its only exact data: between
         them positions and normals are interpolated, and a mesh of a smooth surface carries
         the interpolation's error into its targets (docs/fitting.md, "The mesh's vertices").
-        0 draws on the faces only; a mesh only. Default: ``COARSE_VERTEX_FRACTION`` (0.5) on
+        0 draws on the faces only; a mesh only. Default: ``COARSE_VERTEX_FRACTION`` (0.25) on
         a coarse mesh (its Phong tessellation more than ``CREASE_GAP``, 1e-3 of the
         diagonal, off its triangles), 0 on a finer one and on an analytic map.
     tangent_weight : float
@@ -396,7 +396,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         mean face area in normalised units (total area 4 pi), at most 0.1 (``options.
         CLOSEST_NORMAL_AREA``): a finer mesh's positions carry more of its shape, so its fit
         leans on them more (spot, 5,856 faces: 0.107, so 0.1; the armadillo, 43,240: 0.0145). Weight
-        1 is unstable there (the target normal moves with the point).
+        1 is unstable there (the target normal moves with the point). On a coarse mesh (as
+        for ``vertex_fraction``) ``COARSE_CLOSEST_NORMAL``, 0.01: its interpolated normals
+        are guesses that no surface through its vertices follows.
     anchor_weight : float
         The weight of the nearest-point phase's anchor to the correspondence (1).
     readout_every : int
