@@ -181,11 +181,11 @@ def test_a_fit_draws_its_share_of_vertices(monkeypatch):
     drawn.clear()
     fit_mesh(V, F, steps=2, sampling="error", vertex_fraction=1.0, **TINY)
     assert drawn == [256] * 2                                # no face samples at all
-    # the default: half the batch at the vertices of a coarse mesh (level 2: its Phong
-    # tessellation stands more than CREASE_GAP off its triangles), none on a finer one
+    # the default: a quarter of the batch at the vertices of a coarse mesh (level 2: its
+    # Phong tessellation stands more than CREASE_GAP off its triangles), none on a finer one
     drawn.clear()
     _, r = fit_mesh(V, F, steps=2, **TINY)
-    assert drawn == [128] * 2 and r.choices["vertex_fraction"]["value"] == 0.5
+    assert drawn == [64] * 2 and r.choices["vertex_fraction"]["value"] == 0.25
     assert "a coarse mesh" in r.choices["vertex_fraction"]["why"]
     # and its nearest-point phase leans on positions: its interpolated normals are guesses
     assert r.options["closest_normal_weight"] == COARSE_CLOSEST_NORMAL

@@ -134,10 +134,10 @@ def _coarse(target):
 
 def _vertex_fraction(target):
     """The share of each batch drawn at the vertices, and why: ``COARSE_VERTEX_FRACTION`` on a
-    coarse mesh, 0 otherwise."""
+    coarse mesh, 0 otherwise (why None: no mesh)."""
     gap, kind = _coarse(target)
     if kind is None:
-        return 0.0, "no vertices: the target draws its own points (an analytic map)"
+        return 0.0, None        # no vertices (an analytic map): nothing to choose
     if gap is not None:
         return COARSE_VERTEX_FRACTION, (f"{kind}: between its vertices the targets are "
                                         f"interpolated, at them exact")
@@ -158,7 +158,8 @@ def _plan(target, o, net, elapsed=0.0):
                          f"(fit_mesh); an analytic map has no vertices: use 0")
     if o["vertex_fraction"] is None:
         o["vertex_fraction"], why = _vertex_fraction(target)
-        choices["vertex_fraction"] = {"value": o["vertex_fraction"], "why": why}
+        if why is not None:
+            choices["vertex_fraction"] = {"value": o["vertex_fraction"], "why": why}
     nearest = hasattr(target, "closest")      # targets at the nearest mesh point
     if o["closest_after"] is not None and o["closest_after"] < 1.0 and not nearest:
         raise ValueError(f"closest_after={o['closest_after']:g} needs a mesh target "
