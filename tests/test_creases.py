@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from sns_np.mesh import Correspondence, corner_normals, face_normals, icosphere, vertex_normals
-from sns_np.options import CREASE_ANGLE, CREASE_GAP
+from sns_np.options import COARSE_TURN, CREASE_ANGLE, CREASE_GAP
+from sns_np.shapes import Bobble, Ellipsoid
 from sns_np.surface import fit_mesh
-from sns_np.surface._targets import phong_gap
+from sns_np.surface._targets import coarseness, normal_turn, phong_gap
 
 _spec = importlib.util.spec_from_file_location(
     "cad_shapes", Path(__file__).resolve().parents[1] / "benchmarks" / "cad_shapes.py")
@@ -94,6 +95,36 @@ def test_phong_gap_is_the_chordal_error_on_smooth_meshes_and_grows_at_coarse_edg
     assert 3.5 < c[0] / c[1] < 4.5 and 3.5 < c[1] / c[2] < 4.5
     # the "auto" rule: the coarse jack creases, the fine one does not
     assert phong_gap(*jack(6)) > CREASE_GAP > phong_gap(*jack(16))
+
+
+def test_normal_turn_is_the_median_edge_arc_on_a_sphere():
+    # an icosphere's vertex normals are nearly its (unit) vertices (level 0 exactly: every
+    # vertex alike): across an edge they turn by about the edge's arc, so the measure is
+    # about the median arc, halving with each level
+    from sns_np.mesh._arrays import unique_edges
+    for level, rel in ((0, 1e-9), (1, 0.02), (3, 0.02)):
+        V, F = icosphere(level)
+        E = unique_edges(F, len(V))[0]
+        arcs = np.degrees(np.arccos(np.einsum("ij,ij->i", V[E[:, 0]], V[E[:, 1]])))
+        assert normal_turn(V, F) == pytest.approx(np.median(arcs), rel=rel)
+    t = [normal_turn(*icosphere(level)) for level in (2, 3, 4)]
+    assert 1.9 < t[0] / t[1] < 2.1 and 1.9 < t[1] / t[2] < 2.1
+
+
+def test_coarseness_for_the_size_or_for_the_curvature():
+    # BOBBLE's ripples at icosphere level 5: fine for its size (the Phong gap), coarse for its
+    # curvature (its normals turn by about 31 degrees per edge); the ellipsoid at the same
+    # level is fine by both; at level 2 it is coarse for its size
+    V, F = Bobble().mesh(5)
+    gap, turn = phong_gap(V, F), normal_turn(V, F)
+    assert gap < CREASE_GAP and turn > COARSE_TURN
+    coarse, why = coarseness(gap, turn)
+    assert coarse and why.startswith("a coarse mesh") and f"{turn:.1f} deg" in why
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(5)
+    assert coarseness(phong_gap(V, F), normal_turn(V, F))[0] is False
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
+    gap, turn = phong_gap(V, F), normal_turn(V, F)
+    assert gap > CREASE_GAP and turn < COARSE_TURN and coarseness(gap, turn)[0]
 
 
 def _tiny(V, F, **kw):

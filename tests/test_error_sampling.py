@@ -183,6 +183,7 @@ def test_a_fit_draws_its_share_of_vertices(monkeypatch):
     assert drawn == [256] * 2                                # no face samples at all
     # the default: a quarter of the batch at the vertices of a coarse mesh (level 2: its
     # Phong tessellation stands more than CREASE_GAP off its triangles), none on a finer one
+    # (level 4: its gap below CREASE_GAP, its normals turning by 4-5 deg per edge)
     drawn.clear()
     _, r = fit_mesh(V, F, steps=2, **TINY)
     assert drawn == [64] * 2 and r.choices["vertex_fraction"]["value"] == 0.25

@@ -16,7 +16,6 @@ from ..options import (
     CLOSEST_NORMAL_MAX,
     COARSE_CLOSEST_NORMAL,
     COARSE_VERTEX_FRACTION,
-    CREASE_GAP,
     DETAIL_RANGE,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
@@ -120,25 +119,20 @@ DERIVATIVE_WEIGHTS = {"jacobian_weight": (JACOBIAN_WEIGHT, "derivatives"),
 
 
 def _coarse(target):
-    """``(gap, why)`` for a mesh whose Phong tessellation stands more than ``CREASE_GAP`` off
-    its triangles (a coarse mesh), else ``(None, why)``; ``why`` None for no mesh."""
-    gap = getattr(target, "phong_gap", None) if hasattr(target, "sample_vertices") else None
-    if gap is None:
-        return None, None
-    if gap > CREASE_GAP:
-        return gap, (f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal "
-                     f"off its triangles, > {CREASE_GAP:g})")
-    return None, (f"a fine mesh (its Phong tessellation stands {gap:.2e} of the diagonal off "
-                  f"its triangles, <= {CREASE_GAP:g})")
+    """``(coarse, why)`` for a mesh (:func:`~sns_np.surface._targets.coarseness`), ``(False,
+    None)`` for no mesh."""
+    if not hasattr(target, "sample_vertices"):
+        return False, None
+    return target.coarse
 
 
 def _vertex_fraction(target):
     """The share of each batch drawn at the vertices, and why: ``COARSE_VERTEX_FRACTION`` on a
     coarse mesh, 0 otherwise (why None: no mesh)."""
-    gap, kind = _coarse(target)
+    coarse, kind = _coarse(target)
     if kind is None:
         return 0.0, None        # no vertices (an analytic map): nothing to choose
-    if gap is not None:
+    if coarse:
         return COARSE_VERTEX_FRACTION, (f"{kind}: between its vertices the targets are "
                                         f"interpolated, at them exact")
     return 0.0, f"{kind}: its faces only"
@@ -172,8 +166,8 @@ def _plan(target, o, net, elapsed=0.0):
             "parametrisation" if nearest else "no mesh: the targets are the map's own"}
     if o["closest_normal_weight"] is None:
         a = getattr(target, "mean_face_area", None)
-        gap, kind = _coarse(target) if nearest else (None, None)
-        if gap is not None:
+        coarse, kind = _coarse(target) if nearest else (False, None)
+        if coarse:
             o["closest_normal_weight"] = COARSE_CLOSEST_NORMAL
             choices["closest_normal_weight"] = {
                 "value": COARSE_CLOSEST_NORMAL,

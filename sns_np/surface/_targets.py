@@ -32,10 +32,13 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        # the gap (how coarse the mesh is) is measured here for "auto" creases, else on first
-        # use (the automatic vertex_fraction and closest_normal_weight)
-        self._phong_gap = phong_gap(V, F) if crease_angle == "auto" else None
-        self.crease_angle, self.crease_why = _crease_choice(crease_angle, self._phong_gap)
+        # how coarse the mesh is (its Phong gap and normal turn) is measured here for "auto"
+        # creases, else on first use (the automatic vertex_fraction and closest_normal_weight)
+        self._phong_gap = self._normal_turn = None
+        if crease_angle == "auto":
+            self._phong_gap, self._normal_turn = phong_gap(V, F), normal_turn(V, F)
+        self.crease_angle, self.crease_why = _crease_choice(
+            crease_angle, self._phong_gap, self._normal_turn)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -59,6 +62,18 @@ class _MeshTarget:
         if self._phong_gap is None:
             self._phong_gap = phong_gap(self.corr.V, self.corr.F)
         return self._phong_gap
+
+    @property
+    def normal_turn(self):
+        """The mesh's :func:`normal_turn`, measured on first use: how coarse it is."""
+        if self._normal_turn is None:
+            self._normal_turn = normal_turn(self.corr.V, self.corr.F)
+        return self._normal_turn
+
+    @property
+    def coarse(self):
+        """``(coarse, why)``: :func:`coarseness` of this mesh."""
+        return coarseness(self.phong_gap, self.normal_turn)
 
     def _targets(self, face, beta):
         q, nrm = self.corr.to_mesh(face, beta)
@@ -149,22 +164,41 @@ class _ShapeTarget:
                 None if S2 is None else S2 / self.scale)
 
 
-def _crease_choice(creases, gap):
-    """The crease angle (degrees, or None for none) and why; ``gap`` (the mesh's
-    :func:`phong_gap`) is read for "auto" only."""
-    from ..options import CREASE_ANGLE, CREASE_GAP, check_creases
+def _crease_choice(creases, gap, turn):
+    """The crease angle (degrees, or None for none) and why; ``gap`` and ``turn`` (the
+    mesh's :func:`phong_gap` and :func:`normal_turn`) are read for "auto" only."""
+    from ..options import CREASE_ANGLE, check_creases
     creases = check_creases(creases)
     if creases == "none":
         return None, "given: the vertex normals interpolated everywhere"
     if creases != "auto":
         return creases, "given"
-    if gap > CREASE_GAP:
-        return CREASE_ANGLE, (
-            f"a coarse mesh (its Phong tessellation stands {gap:.2e} of the diagonal off its "
-            f"triangles, > {CREASE_GAP:g}), whose vertex normals would round its sharp "
-            f"edges off over a triangle's width")
-    return None, (f"none: the Phong tessellation stands {gap:.2e} of the diagonal off the "
-                  f"triangles (<= {CREASE_GAP:g}), the vertex normals interpolated everywhere")
+    coarse, why = coarseness(gap, turn)
+    if coarse:
+        return CREASE_ANGLE, (f"{why}, whose vertex normals would round its sharp edges "
+                              f"off over a triangle's width")
+    return None, f"none: {why}, the vertex normals interpolated everywhere"
+
+
+def coarseness(gap, turn):
+    """``(coarse, why)``: whether a mesh with Phong gap ``gap`` (:func:`phong_gap`) and
+    normal turn ``turn`` (:func:`normal_turn`) is coarse, too coarse for its interpolated
+    targets to be followed between its vertices: its Phong tessellation stands more than
+    ``CREASE_GAP`` of the diagonal off its triangles (coarse for its size), or its vertex
+    normals turn by more than ``COARSE_TURN`` degrees across a median edge (coarse for its
+    curvature, e.g. ripples a few edges wide on a fine mesh).
+
+    Examples
+    --------
+    >>> coarseness(2e-3, 5.0)[0], coarseness(5e-4, 30.0)[0], coarseness(5e-4, 10.0)[0]
+    (True, True, False)
+    """
+    from ..options import COARSE_TURN, CREASE_GAP
+    said = (f"its Phong tessellation stands {gap:.2e} of the diagonal off its triangles and "
+            f"its vertex normals turn by {turn:.1f} deg across a median edge")
+    if gap > CREASE_GAP or turn > COARSE_TURN:
+        return True, f"a coarse mesh ({said}: > {CREASE_GAP:g} or > {COARSE_TURN:g} deg)"
+    return False, f"a fine mesh ({said}: <= {CREASE_GAP:g} and <= {COARSE_TURN:g} deg)"
 
 
 def phong_gap(V, F, n=20000):
@@ -182,6 +216,28 @@ def phong_gap(V, F, n=20000):
     _, offset = phong_offset(V[F[face]], N[F[face]], beta)
     diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     return float(0.75 * np.linalg.norm(offset, axis=1).mean() / diagonal)
+
+
+def normal_turn(V, F):
+    """How far a mesh's (angle-weighted) vertex normals turn across its edges: the median
+    over the edges of the angle between the normals at the two ends, in degrees. About the
+    curvature times the edge length where the mesh samples a smooth surface; a fine mesh's
+    normals turn by a few degrees per edge, ripples a few edges wide by tens.
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> [round(normal_turn(*icosphere(level)), 1) for level in (2, 4)]   # the edges' arcs
+    [17.3, 4.3]
+    """
+    from ..mesh import vertex_normals
+    from ..mesh._arrays import unique_edges
+    V = np.asarray(V, dtype=np.float64)
+    F = np.asarray(F)
+    N = vertex_normals(V, F)
+    E = unique_edges(F, len(V))[0]
+    cos = np.clip(np.einsum("ij,ij->i", N[E[:, 0]], N[E[:, 1]]), -1.0, 1.0)
+    return float(np.degrees(np.median(np.arccos(cos))))
 
 
 def _fingerprint(V, F):

@@ -215,9 +215,11 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         two sides of every edge whose faces turn by more than it keep their own normals
         (:func:`sns_np.mesh.corner_normals`), so the fit may keep the edge sharp. "auto"
         (default): ``CREASE_ANGLE`` (60) on a mesh too coarse for its vertex normals to be
-        followed across its sharp edges (its Phong tessellation more than ``CREASE_GAP``,
-        1e-3 of the diagonal, off its triangles), none otherwise; recorded in the model's
-        metadata. docs/fitting.md, "Meshes with sharp edges".
+        followed across its sharp edges (a coarse mesh: its Phong tessellation more than
+        ``CREASE_GAP``, 1e-3 of the diagonal, off its triangles, or its vertex normals
+        turning by more than ``COARSE_TURN``, 20 degrees, across a median edge), none
+        otherwise; recorded in the model's metadata. docs/fitting.md, "Meshes with sharp
+        edges".
     **options
         The fitting options (:class:`FitOptions`: steps, batch, lr, time_budget, ...) and
         those of :func:`fit_sampler` (checkpoint, progress, ...).
@@ -374,8 +376,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         them positions and normals are interpolated, and a mesh of a smooth surface carries
         the interpolation's error into its targets (docs/fitting.md, "The mesh's vertices").
         0 draws on the faces only; a mesh only. Default: ``COARSE_VERTEX_FRACTION`` (0.25) on
-        a coarse mesh (its Phong tessellation more than ``CREASE_GAP``, 1e-3 of the
-        diagonal, off its triangles), 0 on a finer one and on an analytic map.
+        a coarse mesh (as for ``creases``: coarse for its size or for its curvature), 0 on a
+        finer one and on an analytic map.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md).
