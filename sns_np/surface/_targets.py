@@ -231,11 +231,11 @@ def normal_turn(V, F):
     [17.3, 4.3]
     """
     from ..mesh import vertex_normals
-    from ..mesh._arrays import unique_edges
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F)
     N = vertex_normals(V, F)
-    E = unique_edges(F, len(V))[0]
+    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
+    E = np.unique(E, axis=0)                     # each undirected edge once
     cos = np.clip(np.einsum("ij,ij->i", N[E[:, 0]], N[E[:, 1]]), -1.0, 1.0)
     return float(np.degrees(np.median(np.arccos(cos))))
 
