@@ -7,11 +7,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sns_np.mesh import Correspondence, corner_normals, face_normals, icosphere, vertex_normals
+from sns_np.mesh import (
+    Correspondence,
+    corner_normals,
+    face_normals,
+    icosphere,
+    normal_turn,
+    vertex_normals,
+)
 from sns_np.options import COARSE_TURN, CREASE_ANGLE, CREASE_GAP
 from sns_np.shapes import Bobble, Ellipsoid
 from sns_np.surface import fit_mesh
-from sns_np.surface._targets import coarseness, normal_turn, phong_gap
+from sns_np.surface._targets import coarseness, phong_gap
 
 _spec = importlib.util.spec_from_file_location(
     "cad_shapes", Path(__file__).resolve().parents[1] / "benchmarks" / "cad_shapes.py")

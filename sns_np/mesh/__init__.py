@@ -39,6 +39,7 @@ from .operators import (
     face_areas,
     face_normals,
     mass_matrix,
+    normal_turn,
     signed_volume,
     surface_area,
     vertex_normals,
@@ -59,6 +60,7 @@ __all__ = [
     "MeshSummary", "icosphere",
     # operators
     "face_areas", "face_normals", "face_angles", "vertex_normals", "corner_normals",
+    "normal_turn",
     "cotan_laplacian",
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines

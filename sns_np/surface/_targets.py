@@ -9,6 +9,7 @@ match.
 from __future__ import annotations
 
 import hashlib
+from functools import cached_property
 
 import numpy as np
 
@@ -32,13 +33,12 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        # how coarse the mesh is (its Phong gap and normal turn) is measured here for "auto"
-        # creases, else on first use (the automatic vertex_fraction and closest_normal_weight)
-        self._phong_gap = self._normal_turn = None
+        # the mesh's coarseness is measured here for "auto" creases, else on first use (the
+        # automatic vertex_fraction and closest_normal_weight)
         if crease_angle == "auto":
-            self._phong_gap, self._normal_turn = phong_gap(V, F), normal_turn(V, F)
+            self.phong_gap, self.normal_turn = phong_gap(V, F), mesh.normal_turn(V, F)
         self.crease_angle, self.crease_why = _crease_choice(
-            crease_angle, self._phong_gap, self._normal_turn)
+            crease_angle, self.coarse if crease_angle == "auto" else None)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -56,19 +56,16 @@ class _MeshTarget:
         self.smooth = smooth
         self._nearest = None            # the ClosestPoint search, built on first use
 
-    @property
+    @cached_property
     def phong_gap(self):
-        """The mesh's :func:`phong_gap`, measured on first use: how coarse it is."""
-        if self._phong_gap is None:
-            self._phong_gap = phong_gap(self.corr.V, self.corr.F)
-        return self._phong_gap
+        """The mesh's :func:`phong_gap`: how coarse it is for its size."""
+        return phong_gap(self.corr.V, self.corr.F)
 
-    @property
+    @cached_property
     def normal_turn(self):
-        """The mesh's :func:`normal_turn`, measured on first use: how coarse it is."""
-        if self._normal_turn is None:
-            self._normal_turn = normal_turn(self.corr.V, self.corr.F)
-        return self._normal_turn
+        """The mesh's :func:`~sns_np.mesh.normal_turn`: how coarse it is for its curvature."""
+        from .. import mesh
+        return mesh.normal_turn(self.corr.V, self.corr.F)
 
     @property
     def coarse(self):
@@ -164,17 +161,17 @@ class _ShapeTarget:
                 None if S2 is None else S2 / self.scale)
 
 
-def _crease_choice(creases, gap, turn):
-    """The crease angle (degrees, or None for none) and why; ``gap`` and ``turn`` (the
-    mesh's :func:`phong_gap` and :func:`normal_turn`) are read for "auto" only."""
+def _crease_choice(creases, coarse):
+    """The crease angle (degrees, or None for none) and why; ``coarse`` (the mesh's
+    :func:`coarseness`) is read for "auto" only."""
     from ..options import CREASE_ANGLE, check_creases
     creases = check_creases(creases)
     if creases == "none":
         return None, "given: the vertex normals interpolated everywhere"
     if creases != "auto":
         return creases, "given"
-    coarse, why = coarseness(gap, turn)
-    if coarse:
+    is_coarse, why = coarse
+    if is_coarse:
         return CREASE_ANGLE, (f"{why}, whose vertex normals would round its sharp edges "
                               f"off over a triangle's width")
     return None, f"none: {why}, the vertex normals interpolated everywhere"
@@ -182,11 +179,11 @@ def _crease_choice(creases, gap, turn):
 
 def coarseness(gap, turn):
     """``(coarse, why)``: whether a mesh with Phong gap ``gap`` (:func:`phong_gap`) and
-    normal turn ``turn`` (:func:`normal_turn`) is coarse, too coarse for its interpolated
-    targets to be followed between its vertices: its Phong tessellation stands more than
-    ``CREASE_GAP`` of the diagonal off its triangles (coarse for its size), or its vertex
-    normals turn by more than ``COARSE_TURN`` degrees across a median edge (coarse for its
-    curvature, e.g. ripples a few edges wide on a fine mesh).
+    normal turn ``turn`` (:func:`~sns_np.mesh.normal_turn`) is coarse, too coarse for its
+    interpolated targets to be followed between its vertices: its Phong tessellation stands
+    more than ``CREASE_GAP`` of the diagonal off its triangles (coarse for its size), or its
+    vertex normals turn by more than ``COARSE_TURN`` degrees across a median edge (coarse for
+    its curvature, e.g. ripples a few edges wide on a fine mesh).
 
     Examples
     --------
@@ -216,28 +213,6 @@ def phong_gap(V, F, n=20000):
     _, offset = phong_offset(V[F[face]], N[F[face]], beta)
     diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     return float(0.75 * np.linalg.norm(offset, axis=1).mean() / diagonal)
-
-
-def normal_turn(V, F):
-    """How far a mesh's (angle-weighted) vertex normals turn across its edges: the median
-    over the edges of the angle between the normals at the two ends, in degrees. About the
-    curvature times the edge length where the mesh samples a smooth surface; a fine mesh's
-    normals turn by a few degrees per edge, ripples a few edges wide by tens.
-
-    Examples
-    --------
-    >>> from sns_np.mesh import icosphere
-    >>> [round(normal_turn(*icosphere(level)), 1) for level in (2, 4)]   # the edges' arcs
-    [17.3, 4.3]
-    """
-    from ..mesh import vertex_normals
-    V = np.asarray(V, dtype=np.float64)
-    F = np.asarray(F)
-    N = vertex_normals(V, F)
-    E = np.sort(np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]]), axis=1)
-    E = np.unique(E, axis=0)                     # each undirected edge once
-    cos = np.clip(np.einsum("ij,ij->i", N[E[:, 0]], N[E[:, 1]]), -1.0, 1.0)
-    return float(np.degrees(np.median(np.arccos(cos))))
 
 
 def _fingerprint(V, F):
