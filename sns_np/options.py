@@ -376,7 +376,7 @@ class FitOptions(Options):
                                 f"(default: {_auto('warmup')})", Int(0), resume=True)
     sampling: str | None = option(
         None, f"how training points are drawn: uniformly by area, or weighted by the recent "
-        f"error with importance weights, the same objective (a mesh only; default: "
+        f"error with importance weights, the same objective (default: "
         f"{_auto('sampling')})", Choice(*SAMPLINGS), resume=True)
     vertex_fraction: float | None = option(
         None, "share of each batch drawn at the mesh's vertices, whose positions are the "

@@ -142,10 +142,26 @@ def test_sampling_choice_and_refusals():
     assert r.choices["sampling"]["why"].startswith("detailed")
     _, r = fit_mesh(*Ellipsoid(1.0, 1.3, 0.7).mesh(2), **opts)
     assert r.options["sampling"] == "area"      # smooth: uniform
-    _, r = fit_shape(Bobble(), **opts)          # an analytic map draws its own points
-    assert r.options["sampling"] == "area" and "analytic" in r.choices["sampling"]["why"]
-    with pytest.raises(ValueError, match="needs a mesh target"):
-        fit_shape(Bobble(), sampling="error", **opts)
+    _, r = fit_shape(Bobble(), **opts)          # a detailed map: its parameter sphere's cells
+    assert r.options["sampling"] == AUTO["detailed"]["sampling"] == "error"
+    assert r.choices["sampling"]["why"].startswith("detailed")
+    _, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
+    assert r.options["sampling"] == "area"
+
+    class Drawn:                                # a target that draws its points itself
+        parametrisation, area, center, scale = "exact", 4 * np.pi, np.zeros(3), 1.0
+        bbox_diagonal, fingerprint = 2 * np.sqrt(3), "drawn"
+
+        def sample(self, n, rng):
+            from sns_np.sampling import uniform_sphere
+            p = uniform_sphere(n, rng)
+            return p, p, p
+
+        evaluate_at = staticmethod(lambda p: (p, p))
+
+    from sns_np.surface import fit_sampler
+    with pytest.raises(ValueError, match="cells to weight"):
+        fit_sampler(Drawn(), sampling="error", **opts)
     with pytest.raises(ValueError, match="sampling"):
         fit_mesh(V, F, sampling="stratified", **opts)
 
@@ -203,3 +219,91 @@ def test_vertex_fraction_refusals():
         fit_shape(Bobble(), steps=2, vertex_fraction=0.5, **TINY)
     with pytest.raises(ValueError, match=r"vertex_fraction must lie in \[0, 1\], got 1.5"):
         fit_mesh(*Ellipsoid(1.0, 1.3, 0.7).mesh(1), steps=2, vertex_fraction=1.5, **TINY)
+
+
+def test_uniform_in_spherical_triangles_is_uniform_by_area():
+    """Counts in the four midpoint sub-triangles of a large and of a skewed triangle follow
+    their areas (chi-square, 3 degrees of freedom), and every point lies inside."""
+    from sns_np.mesh import spherical_triangle_areas, uniform_in_spherical_triangles
+
+    def unit(x):
+        return np.asarray(x, float) / np.linalg.norm(x)
+
+    def inside(P, a, b, c):
+        return np.logical_and.reduce([(P @ np.cross(x, y)) * np.dot(z, np.cross(x, y))
+                                      >= -1e-12 for x, y, z in ((a, b, c), (b, c, a),
+                                                                (c, a, b))])
+
+    for tri in ((np.eye(3)[0], np.eye(3)[1], np.eye(3)[2]),
+                (unit([1, 0, 0]), unit([0, 1, 0.05]), unit([0.5, 0.6, 0.9]))):
+        n = 200_000
+        P = uniform_in_spherical_triangles(*(np.tile(x, (n, 1)) for x in tri),
+                                           np.random.default_rng(1))
+        assert np.allclose(np.linalg.norm(P, axis=1), 1.0)
+        A, B, C = tri
+        assert np.all(inside(P, A, B, C))
+        Vs = np.array([A, B, C, unit(A + B), unit(B + C), unit(C + A)])
+        F = np.array([[0, 3, 5], [3, 1, 4], [5, 4, 2], [3, 4, 5]])
+        area = spherical_triangle_areas(Vs, F)
+        counts = np.array([inside(P, *Vs[f]).sum() for f in F])
+        expected = n * area / area.sum()
+        assert ((counts - expected) ** 2 / expected).sum() < 16.3      # p = 0.001
+        # and the plain normalised flat-barycentric draw is not uniform: the test can fail
+        if tri[0][0] == 1 and tri[1][1] == 1 and tri[2][2] == 1:
+            r = np.random.default_rng(2).dirichlet(np.ones(3), n) @ np.array(tri)
+            r /= np.linalg.norm(r, axis=1, keepdims=True)
+            flat = np.array([inside(r, *Vs[f]).sum() for f in F])
+            assert ((flat - expected) ** 2 / expected).sum() > 100
+
+
+def test_shape_cells_draw_the_uniform_objective():
+    """An analytic map's cells tile the sphere; a draw of cells by area and points within
+    them is uniform on the sphere; the sampler's weighted means are the sphere means."""
+    from sns_np.surface._targets import _ShapeTarget
+    t = _ShapeTarget(Bobble())
+    assert np.isclose(t.face_area.sum(), 4 * np.pi)
+    s = ErrorSampler(t, batch=512)
+    g = np.random.default_rng(0)
+    hot = t.face_centroid[:, 0] > 0.6
+    for _ in range(30):
+        p, q, n, JT, ST, w = s.sample(512, g, second=False)
+        assert JT.shape == (512, 3, 2) and ST is None
+        s.observe(np.where(hot[s.labels[s._cells]], 1.0, 1e-4))
+    assert s.prob[s.labels[hot]].sum() > 2 * t.face_area[hot].sum() / (4 * np.pi)
+    p, q, n, JT, ST, w = s.sample(200_000, g)
+    s.observe(np.zeros(len(p)))
+    # sphere means (x uniform in [-1, 1] by Archimedes): x^2 -> 1/3, exp(x) -> sinh(1)
+    for fval, exact in ((lambda x: x[:, 0] ** 2, 1.0 / 3.0),
+                        (lambda x: np.exp(x[:, 0]), np.sinh(1.0))):
+        assert abs((w * fval(p)).mean() - exact) < 0.01 * exact
+        assert abs(fval(p).mean() - exact) > 3 * abs((w * fval(p)).mean() - exact)
+    # the jets are the map's own at the drawn points
+    q2, n2 = t.evaluate_at(p[:50])
+    assert np.allclose(q[:50], q2, atol=1e-12) and np.allclose(n[:50], n2, atol=1e-12)
+
+
+def test_weighted_derivative_losses_by_differences():
+    from sns_np.surface.losses import hessian_loss, jacobian_loss
+    g = np.random.default_rng(7)
+    JD, JT = g.standard_normal((5, 3, 2)), g.standard_normal((5, 3, 2))
+    D2D, Jp, T2 = (g.standard_normal((5, 3, 2, 2)), g.standard_normal((5, 3)),
+                   g.standard_normal((5, 3, 2, 2)))
+    w = g.uniform(0.2, 3.0, 5)
+
+    def fj(x):
+        v, d, _ = jacobian_loss(x.reshape(5, 3, 2), JT, 5, 0.7, sample_weight=w)
+        return v, d.ravel()
+
+    def fh(x):
+        v, dD, dJ, _ = hessian_loss(x[:60].reshape(5, 3, 2, 2), x[60:].reshape(5, 3), T2, 5,
+                                    0.3, sample_weight=w)
+        return v, np.concatenate([dD.ravel(), dJ.ravel()])
+
+    assert check_gradient(fj, JD.ravel()) < 1e-7
+    assert check_gradient(fh, np.concatenate([D2D.ravel(), Jp.ravel()])) < 1e-7
+    # unit weights are the plain losses; other weights are not
+    assert np.isclose(jacobian_loss(JD, JT, 5, 0.7, sample_weight=np.ones(5))[0],
+                      jacobian_loss(JD, JT, 5, 0.7)[0])
+    assert np.isclose(hessian_loss(D2D, Jp, T2, 5, 0.3, sample_weight=np.ones(5))[0],
+                      hessian_loss(D2D, Jp, T2, 5, 0.3)[0])
+    assert not np.isclose(fj(JD.ravel())[0], jacobian_loss(JD, JT, 5, 0.7)[0])

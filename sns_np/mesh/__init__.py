@@ -51,6 +51,7 @@ from .spherical import (
     face_stretch,
     orientation_determinants,
     spherical_triangle_areas,
+    uniform_in_spherical_triangles,
 )
 from .stretch import minimise_stretch
 
@@ -69,6 +70,7 @@ __all__ = [
     # spherical embedding
     "spherical_embedding", "EmbeddingReport", "mobius_centre", "minimise_stretch",
     "equalise_areas", "FoldRepair", "orientation_determinants", "spherical_triangle_areas",
+    "uniform_in_spherical_triangles",
     "area_distortion", "face_stretch",
     # correspondence
     "Correspondence", "sample_surface", "uniform_barycentric", "SphereLocator", "ClosestPoint",

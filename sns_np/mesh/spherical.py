@@ -83,6 +83,63 @@ def spherical_triangle_areas(Vs, F) -> np.ndarray:
     return 2.0 * np.arctan2(det, den)
 
 
+def uniform_in_spherical_triangles(A, B, C, rng) -> np.ndarray:
+    """One point uniform by area in each geodesic triangle ``(A[i], B[i], C[i])`` of the
+    unit sphere.
+
+    Arvo's inversion of the area function: a first uniform number picks the sub-triangle
+    ``A B C'`` holding that share of the area (``C'`` on the arc ``A C``), a second one a
+    point on the arc ``B C'`` with the density that makes the result uniform.
+
+    Parameters
+    ----------
+    A, B, C : (n, 3) float arrays, unit vectors; each triangle positively oriented or not,
+        non-degenerate (angles away from 0 and pi)
+    rng : numpy.random.Generator (two uniform numbers per point)
+
+    Returns
+    -------
+    p : (n, 3) float array of unit vectors inside the triangles
+
+    References
+    ----------
+    J. Arvo, "Stratified sampling of spherical triangles", SIGGRAPH 1995.
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(1)
+    >>> g = np.random.default_rng(0)
+    >>> p = uniform_in_spherical_triangles(V[F[:, 0]], V[F[:, 1]], V[F[:, 2]], g)
+    >>> p.shape, bool(np.allclose(np.linalg.norm(p, axis=1), 1.0))
+    ((80, 3), True)
+    """
+    A, B, C = (np.asarray(X, dtype=np.float64) for X in (A, B, C))
+
+    def unit(x):
+        return x / np.linalg.norm(x, axis=1, keepdims=True)
+
+    def dot(x, y):
+        return np.einsum("ij,ij->i", x, y)
+
+    def corner(P, Q, R):            # the angle at P between the arcs P Q and P R
+        return np.arccos(np.clip(dot(unit(Q - dot(P, Q)[:, None] * P),
+                                     unit(R - dot(P, R)[:, None] * P)), -1.0, 1.0))
+
+    alpha, beta, gamma = corner(A, B, C), corner(B, C, A), corner(C, A, B)
+    share = rng.random(len(A)) * (alpha + beta + gamma - np.pi)     # the sub-triangle's area
+    s, t = np.sin(share - alpha), np.cos(share - alpha)
+    u = t - np.cos(alpha)
+    v = s + np.sin(alpha) * dot(A, B)
+    q = np.clip(((v * t - u * s) * np.cos(alpha) - v) / ((v * s + u * t) * np.sin(alpha)),
+                -1.0, 1.0)
+    Cq = q[:, None] * A + np.sqrt(1.0 - q * q)[:, None] * unit(C - dot(C, A)[:, None] * A)
+    z = 1.0 - rng.random(len(A)) * (1.0 - dot(Cq, B))
+    p = z[:, None] * B + np.sqrt(np.maximum(1.0 - z * z, 0.0))[:, None] * unit(
+        Cq - dot(Cq, B)[:, None] * B)
+    return unit(p)
+
+
 def area_distortion(V, F, Vs) -> np.ndarray:
     """Per-face log area ratio ``log((s_f / sum s) / (A_f / sum A))`` (0: area-preserving).
 

@@ -1,4 +1,4 @@
-"""Training points drawn where the fit is still wrong: error-weighted sampling of a mesh.
+"""Training points drawn where the fit is still wrong: error-weighted sampling.
 
 Uniform sampling by area spends most samples where the network is already right (the smooth
 flanks of a cow) and few on what it still misses (ears, horns, eyes). This sampler keeps, for
@@ -71,7 +71,8 @@ class ErrorSampler:
 
     Parameters
     ----------
-    target : a mesh target (``face_area``, ``face_centroid`` and ``sample_faces(face, rng)``)
+    target : a mesh target, or an analytic map's (whose cells are geodesic triangles of the
+        parameter sphere): ``face_area``, ``face_centroid`` and ``sample_faces(face, rng)``
     batch : int, samples per step (sizes the cells: see ``SAMPLES_PER_CELL``)
     mix, decay, every : floats and int, as ``ERROR_SAMPLING``
 
@@ -124,8 +125,10 @@ class ErrorSampler:
         self._cum = np.cumsum(prob)
         self.weight = self.area / np.maximum(prob, np.finfo(float).tiny)
 
-    def sample(self, n, rng):
-        """``(p, q, normals, weights)`` of ``n`` points; ``weights`` average 1 in expectation."""
+    def sample(self, n, rng, **options):
+        """``(p, q, normals, weights)`` of ``n`` points; ``weights`` average 1 in expectation.
+        ``options`` go to the target's ``sample_faces`` (an analytic map's ``second``: then
+        ``(p, q, normals, JT, ST, weights)``, its jets before the weights)."""
         c = np.minimum(np.searchsorted(self._cum, rng.random(n) * self._cum[-1], side="right"),
                        self.n_cells - 1)
         u = self._start[c] + rng.random(n) * self.area[c] * self._cum_face[-1]
@@ -137,7 +140,7 @@ class ErrorSampler:
             first = np.searchsorted(self.labels[self._order], c[bad], side="left")
             face[bad] = self._order[first]
         self._cells = c
-        return (*self.target.sample_faces(face, rng), self.weight[c])
+        return (*self.target.sample_faces(face, rng, **options), self.weight[c])
 
     def observe(self, err):
         """Record the per-sample errors of the last draw (unweighted, as the loss's

@@ -142,11 +142,11 @@ def _plan(target, o, net, elapsed=0.0):
     """Fill the options left to "auto" (None) from the target's detail; returns the choices
     made (option -> {"value", "why"})."""
     choices = {}
-    cells = hasattr(target, "sample_faces")        # a mesh: faces to weight by their error
+    cells = hasattr(target, "sample_faces")    # faces (or cells) to weight by their error
     if o["sampling"] == "error" and not cells:
-        raise ValueError("sampling='error' needs a mesh target (fit_mesh), whose faces carry "
-                         "the error; this target draws its points itself: use "
-                         "sampling='area'")
+        raise ValueError("sampling='error' needs a target with cells to weight (fit_mesh's "
+                         "faces, fit_shape's parameter sphere) by their error; this one draws "
+                         "its points itself: use sampling='area'")
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
@@ -188,8 +188,8 @@ def _plan(target, o, net, elapsed=0.0):
             raise ValueError(NO_JACOBIAN.format(name, o[name]))
     if o["sampling"] is None and not cells:
         o["sampling"] = "area"
-        choices["sampling"] = {"value": "area", "why": "the target draws its own points (an "
-                               "analytic map): no mesh faces to weight by their error"}
+        choices["sampling"] = {"value": "area", "why": "the target draws its own points: no "
+                               "cells to weight by their error"}
     if net is not None:
         # fine-tuning (flows, refits): the smooth end's rate and warm-up, nothing measured;
         # the network's own width

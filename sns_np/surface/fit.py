@@ -257,7 +257,8 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
 def fit_shape(shape, **options):
     """Fit a SphericalNeuralSurface directly to an analytic surface map (as the paper does).
 
-    Sphere points are drawn uniformly; targets are ``shape(p)``, its exact normals and its
+    Sphere points are drawn uniformly (for a detailed map, where the recent error is, with
+    importance weights: ``sampling``); targets are ``shape(p)``, its exact normals and its
     first and second derivatives along the sphere (``jacobian_weight``,
     ``hessian_weight``).
     Options as :func:`fit_sampler`. Returns (surface, report).
@@ -365,11 +366,13 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         spent (the embedding). A ``steps`` that this budget cannot reach is refused before
         the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
     sampling : {"area", "error"}
-        How training points are drawn: uniformly by area, or (a mesh only) with probability
-        that follows each patch's recent error, mixed with the uniform draw, each point
-        carrying the importance weight that keeps the expected loss the uniform one
-        (:mod:`sns_np.surface._adaptive`). Default: chosen from the target's detail
-        (``AUTO``, docs/fitting.md); ``"area"`` for an analytic map and a warm start.
+        How training points are drawn: uniformly (by area on a mesh, on the sphere for an
+        analytic map), or with probability that follows each cell's recent error (a patch
+        of the mesh's faces; a geodesic triangle of the parameter sphere for an analytic
+        map), mixed with the uniform draw, each point carrying the importance weight that
+        keeps the expected loss the uniform one (:mod:`sns_np.surface._adaptive`). Default:
+        chosen from the target's detail (``AUTO``, docs/fitting.md); ``"area"`` for a warm
+        start and for a target that draws its points itself.
     vertex_fraction : float in [0, 1]
         Share of each batch drawn at the mesh's vertices (uniformly, importance weight 1),
         the rest as ``sampling`` says. A mesh's vertices are its only exact data: between
@@ -539,9 +542,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
             with signals:
                 while step < total:
                     rng_at_step = rng.bit_generator.state
-                    if wj or wh:    # an analytic map: no sampler, no vertices (_plan)
+                    if (wj or wh) and sampler is None:      # an analytic map, no vertices
                         p, q, nt, JT, ST = target.sample_jet(n_faces, rng, second=bool(wh))
                         wts = None
+                    elif wj or wh:                          # drawn where its error is
+                        p, q, nt, JT, ST, wts = sampler.sample(n_faces, rng, second=bool(wh))
                     else:
                         p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
@@ -575,7 +580,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                                 y, JD, qc[sl], ntc[sl], len(p), w, tangent_weight=tw,
                                 sample_weight=sw, pointwise=errors is not None)
                         if wj:
-                            val_j, dJD_j, _ = jacobian_loss(JD, JTc[sl], len(p), wj)
+                            val_j, dJD_j, _ = jacobian_loss(JD, JTc[sl], len(p), wj,
+                                                            sample_weight=sw)
                             val += val_j
                             dJD = dJD_j if dJD is None else dJD + dJD_j
                         parts["position"] += pr["position"]
@@ -586,8 +592,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 
                     def loss_fn2(y, JD3, D2D, sl):     # the Hessian loss's [e_u, e_v, p]
                         val, dy, dJD = loss_fn(y, JD3[:, :, :2], sl)
-                        val_h, dD2D, dJp, _ = hessian_loss(D2D, JD3[:, :, 2], STc[sl],
-                                                           len(p), wh)
+                        val_h, dD2D, dJp, _ = hessian_loss(
+                            D2D, JD3[:, :, 2], STc[sl], len(p), wh,
+                            sample_weight=None if wc is None else wc[sl])
                         dJD3 = np.zeros_like(JD3)
                         if dJD is not None:
                             dJD3[:, :, :2] = dJD

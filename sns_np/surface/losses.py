@@ -122,7 +122,7 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     return loss, dy, dJD, parts
 
 
-def jacobian_loss(JD, JT, n_total, weight=1.0):
+def jacobian_loss(JD, JT, n_total, weight=1.0, sample_weight=None):
     """Squared error of the derivatives along the sphere on one chunk, and its cotangent.
 
     Parameters
@@ -131,11 +131,13 @@ def jacobian_loss(JD, JT, n_total, weight=1.0):
     JT : (c, 3, 2) float array, the target's derivatives along the same directions
     n_total : int, the number N of points in the whole batch (the mean's denominator)
     weight : float, mu
+    sample_weight : (c,) float array, optional, per-point weights of the sum (as in
+        :func:`position_normal_loss`)
 
     Returns
     -------
     loss : float (this chunk's contribution), dJD : (c, 3, 2) float array, sq : float (the
-    chunk's summed squared error, unweighted)
+    chunk's summed squared error, weighted by ``sample_weight`` only)
 
     Examples
     --------
@@ -146,11 +148,15 @@ def jacobian_loss(JD, JT, n_total, weight=1.0):
     (0.25, -0.5, 1.0)
     """
     E = JD - JT
-    sq = float(np.einsum("kia,kia->", E, E))
-    return weight * sq / n_total, (2.0 * weight / n_total) * E, sq
+    if sample_weight is None:
+        sq = float(np.einsum("kia,kia->", E, E))
+        return weight * sq / n_total, (2.0 * weight / n_total) * E, sq
+    sw = np.asarray(sample_weight, dtype=E.dtype)
+    sq = float(sw @ np.einsum("kia,kia->k", E, E))
+    return weight * sq / n_total, (2.0 * weight / n_total) * (sw[:, None, None] * E), sq
 
 
-def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
+def hessian_loss(D2D, Jp, T2, n_total, weight=1.0, sample_weight=None):
     """Squared error of the second derivatives along the sphere on one chunk, and cotangents.
 
     Parameters
@@ -160,11 +166,14 @@ def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
     T2 : (c, 3, 2, 2) float array, the target's ``S_ab = D2[e_a, e_b] - delta_ab J p``
     n_total : int, the number N of points in the whole batch (the mean's denominator)
     weight : float, nu
+    sample_weight : (c,) float array, optional, per-point weights of the sum (as in
+        :func:`position_normal_loss`)
 
     Returns
     -------
     loss : float (this chunk's contribution), dD2D : (c, 3, 2, 2) float array, dJp : (c, 3)
-    float array, sq : float (the chunk's summed squared error, unweighted)
+    float array, sq : float (the chunk's summed squared error, weighted by ``sample_weight``
+    only)
 
     Examples
     --------
@@ -175,6 +184,11 @@ def hessian_loss(D2D, Jp, T2, n_total, weight=1.0):
     (1.0, 2.0, [[0.0, 0.0, 2.0]])
     """
     E = sphere_second_derivatives(D2D, Jp) - T2
-    sq = float(np.einsum("kiab,kiab->", E, E))
-    G = (2.0 * weight / n_total) * E
+    if sample_weight is None:
+        sq = float(np.einsum("kiab,kiab->", E, E))
+        G = (2.0 * weight / n_total) * E
+    else:
+        sw = np.asarray(sample_weight, dtype=E.dtype)
+        sq = float(sw @ np.einsum("kiab,kiab->k", E, E))
+        G = (2.0 * weight / n_total) * (sw[:, None, None, None] * E)
     return weight * sq / n_total, G, -(G[:, :, 0, 0] + G[:, :, 1, 1]), sq
