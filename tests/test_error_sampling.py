@@ -147,6 +147,9 @@ def test_sampling_choice_and_refusals():
     assert r.choices["sampling"]["why"].startswith("detailed")
     _, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), **opts)
     assert r.options["sampling"] == "area"
+    # without the derivative losses the map's draw is a mesh's: points, targets, weights
+    _, r = fit_shape(Bobble(), jacobian_weight=0, hessian_weight=0, **opts)
+    assert r.options["sampling"] == "error" and r.steps == 2
 
     class Drawn:                                # a target that draws its points itself
         parametrisation, area, center, scale = "exact", 4 * np.pi, np.zeros(3), 1.0
@@ -266,11 +269,11 @@ def test_shape_cells_draw_the_uniform_objective():
     g = np.random.default_rng(0)
     hot = t.face_centroid[:, 0] > 0.6
     for _ in range(30):
-        p, q, n, JT, ST, w = s.sample(512, g, second=False)
+        p, q, n, JT, ST, w = s.sample(512, g, jets=True)
         assert JT.shape == (512, 3, 2) and ST is None
         s.observe(np.where(hot[s.labels[s._cells]], 1.0, 1e-4))
     assert s.prob[s.labels[hot]].sum() > 2 * t.face_area[hot].sum() / (4 * np.pi)
-    p, q, n, JT, ST, w = s.sample(200_000, g)
+    p, q, n, w = s.sample(200_000, g)                 # without jets: as a mesh's draw
     s.observe(np.zeros(len(p)))
     # sphere means (x uniform in [-1, 1] by Archimedes): x^2 -> 1/3, exp(x) -> sinh(1)
     for fval, exact in ((lambda x: x[:, 0] ** 2, 1.0 / 3.0),

@@ -127,8 +127,8 @@ class ErrorSampler:
 
     def sample(self, n, rng, **options):
         """``(p, q, normals, weights)`` of ``n`` points; ``weights`` average 1 in expectation.
-        ``options`` go to the target's ``sample_faces`` (an analytic map's ``second``: then
-        ``(p, q, normals, JT, ST, weights)``, its jets before the weights)."""
+        ``options`` go to the target's ``sample_faces`` (an analytic map's ``jets`` and
+        ``second``: then ``(p, q, normals, JT, ST, weights)``, its jets before the weights)."""
         c = np.minimum(np.searchsorted(self._cum, rng.random(n) * self._cum[-1], side="right"),
                        self.n_cells - 1)
         u = self._start[c] + rng.random(n) * self.area[c] * self._cum_face[-1]

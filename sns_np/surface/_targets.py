@@ -162,14 +162,15 @@ class _ShapeTarget:
         """The cells' centres (unit vectors)."""
         return self._cells[3]
 
-    def sample_faces(self, face, rng, second=False):
-        """Points uniform on the sphere within the given cells ``(n,)``, with their jets:
-        ``(p, q, normals, JT, ST)`` as :meth:`sample_jet`."""
+    def sample_faces(self, face, rng, jets=False, second=False):
+        """Points uniform on the sphere within the given cells ``(n,)``: ``(p, q, normals)``
+        as :meth:`sample`, or with ``jets`` ``(p, q, normals, JT, ST)`` as
+        :meth:`sample_jet`."""
         from ..mesh import uniform_in_spherical_triangles
         V, F = self._cells[:2]
         T = F[np.asarray(face)]
         p = uniform_in_spherical_triangles(V[T[:, 0]], V[T[:, 1]], V[T[:, 2]], rng)
-        return (p, *self._jet(p, second))
+        return (p, *self._jet(p, second)) if jets else (p, *self._jet(p)[:2])
 
     def sample_jet(self, n, rng, second=False):
         """``sample``'s points with the map's derivatives along ``tangent_frame(p)`` in the

@@ -546,7 +546,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                         p, q, nt, JT, ST = target.sample_jet(n_faces, rng, second=bool(wh))
                         wts = None
                     elif wj or wh:                          # drawn where its error is
-                        p, q, nt, JT, ST, wts = sampler.sample(n_faces, rng, second=bool(wh))
+                        p, q, nt, JT, ST, wts = sampler.sample(n_faces, rng, jets=True,
+                                                               second=bool(wh))
                     else:
                         p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
