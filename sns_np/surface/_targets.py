@@ -170,7 +170,7 @@ class _ShapeTarget:
         V, F = self._cells[:2]
         T = F[np.asarray(face)]
         p = uniform_in_spherical_triangles(V[T[:, 0]], V[T[:, 1]], V[T[:, 2]], rng)
-        return (p, *self._jet(p, second)) if jets else (p, *self._jet(p)[:2])
+        return (p, *self._jet(p, second)) if jets else (p, *self.evaluate_at(p))
 
     def sample_jet(self, n, rng, second=False):
         """``sample``'s points with the map's derivatives along ``tangent_frame(p)`` in the
