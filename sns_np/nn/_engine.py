@@ -145,24 +145,25 @@ def forward_chunks(net, x, D, m, k, Y, c, chunks, act):
     n = x.shape[0]
     S = n_streams(m, k)
     w = net.width
-    hid = np.empty((c, S, w), net.dtype)
-    T1 = np.empty((c, S, w), net.dtype)
-    T2 = np.empty((c, S, w), net.dtype)
+    bufs = np.empty((3, c, S, w), net.dtype)       # h, and two scratch arrays, rotating
     sig = np.empty((c, w), net.dtype)
     b0, b1, b2, b3 = _biases(net)
     for i in chunks:
         lo, hi = i * c, min(i * c + c, n)
         r = hi - lo
-        h, t1, t2, sg = hid[:r], T1[:r], T2[:r], sig[:r]
-        h2, t12, t22 = h.reshape(r * S, w), t1.reshape(r * S, w), t2.reshape(r * S, w)
+        h, t1, t2 = bufs[0, :r], bufs[1, :r], bufs[2, :r]
+        sg = sig[:r]
         first_layer(net, x[lo:hi], None if D is None else D[lo:hi], m, t1)
         act(t1, t1, b0, h, sg, m, k, False, net.bias)
+        # a kernel's output never overlaps its inputs ("Aliasing" in _kernels.py): the
+        # block's next h goes to the scratch array that held A, and the two swap roles
         for blk in range(net.depth):
-            np.matmul(h2, net.W1[blk].T, out=t12)
-            act(t1, t1, b1[blk], t1, sg, m, k, False, net.bias)
-            np.matmul(t12, net.W2[blk].T, out=t22)
-            act(t2, h, b2[blk], h, sg, m, k, True, net.bias)
-        np.matmul(h2, net.W3.T, out=Y[lo:hi].reshape(r * S, net.out_dim))
+            np.matmul(flat(h, r), net.W1[blk].T, out=flat(t1, r))       # U
+            act(t1, t1, b1[blk], t2, sg, m, k, False, net.bias)         # A = s(U)
+            np.matmul(flat(t2, r), net.W2[blk].T, out=flat(t1, r))      # A W2^T
+            act(t1, h, b2[blk], t2, sg, m, k, True, net.bias)           # next h
+            h, t2 = t2, h
+        np.matmul(flat(h, r), net.W3.T, out=Y[lo:hi].reshape(r * S, net.out_dim))
         if net.bias:
             Y[lo:hi, 0, :] += b3
 
@@ -346,7 +347,9 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k
     SGZ = np.empty((depth, c, w), dt)
     Y = np.empty((c, S, o), dt)
     hbar = np.empty((c, S, w), dt)
+    zbar = np.empty((c, S, w), dt)
     abar = np.empty((c, S, w), dt)
+    ubar = np.empty((c, S, w), dt)
     tmp = np.empty((c, S, w), dt)
     gv = _grad_views(net, grad)
     b0, b1, b2, b3 = _biases(net)
@@ -388,23 +391,24 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k
             gv["b3"] += Ybar[:, 0, :].sum(axis=0)
         np.matmul(Yb, net.W3, out=flat(hbar, r))
         for blk in range(depth - 1, -1, -1):
-            act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], hbar[:r], m)
-            gv["W2"][blk] += flat(hbar, r).T @ flat(A[blk], r)
+            # hbar: of the block's output h; zbar, abar, ubar: of its Zt, A and U
+            act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], zbar[:r], m)
+            gv["W2"][blk] += flat(zbar, r).T @ flat(A[blk], r)
             if net.bias:
-                gv["b2"][blk] += hbar[:r, 0, :].sum(axis=0)
-            np.matmul(flat(hbar, r), net.W2[blk], out=flat(abar, r))
-            act_back(U[blk, :r], SGU[blk, :r], abar[:r], abar[:r], m)
-            gv["W1"][blk] += flat(abar, r).T @ flat(hid[blk], r)
+                gv["b2"][blk] += zbar[:r, 0, :].sum(axis=0)
+            np.matmul(flat(zbar, r), net.W2[blk], out=flat(abar, r))
+            act_back(U[blk, :r], SGU[blk, :r], abar[:r], ubar[:r], m)
+            gv["W1"][blk] += flat(ubar, r).T @ flat(hid[blk], r)
             if net.bias:
-                gv["b1"][blk] += abar[:r, 0, :].sum(axis=0)
-            np.matmul(flat(abar, r), net.W1[blk], out=flat(tmp, r))
-            hbar[:r] += tmp[:r]
-        act_back(Z0[:r], SG0[:r], hbar[:r], hbar[:r], m)
-        gv["W0"] += hbar[:r, 0, :].T @ x[lo:hi]
+                gv["b1"][blk] += ubar[:r, 0, :].sum(axis=0)
+            np.matmul(flat(ubar, r), net.W1[blk], out=flat(tmp, r))
+            np.add(zbar[:r], tmp[:r], out=hbar[:r])       # the residual path and the block's
+        act_back(Z0[:r], SG0[:r], hbar[:r], zbar[:r], m)
+        gv["W0"] += zbar[:r, 0, :].T @ x[lo:hi]
         for a in range(m):
             if Dc is None:
-                gv["W0"][:, a] += hbar[:r, 1 + a, :].sum(axis=0)
+                gv["W0"][:, a] += zbar[:r, 1 + a, :].sum(axis=0)
             else:
-                gv["W0"] += hbar[:r, 1 + a, :].T @ Dc[:, :, a]
+                gv["W0"] += zbar[:r, 1 + a, :].T @ Dc[:, :, a]
         if net.bias:
-            gv["b0"] += hbar[:r, 0, :].sum(axis=0)
+            gv["b0"] += zbar[:r, 0, :].sum(axis=0)
