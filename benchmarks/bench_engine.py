@@ -14,6 +14,9 @@ For the reference network (width 256, depth 8, no biases) it prints, per dtype:
 * the order-2 training step of an analytic map's fit (the Hessian loss: directions
   ``[e_u, e_v, p]``, second derivatives along ``e_u, e_v``, 7 streams): time, its products
   alone, their ratio, and its cost relative to the order-1 step.
+* float32 only: the step of a detailed mesh's fit (width 128, 512 points, the defaults of a
+  detailed target): time, its products alone, their ratio, and the optimiser's update (Adam,
+  SOAP with its change of bases every ten steps) beside it.
 
 Targets (issue 2): efficiency >= 0.80 and >= 2.5x PyTorch for the full jet; training step
 >= 1.3x PyTorch in float32 and >= 1.0x in float64. Nothing is asserted: the script prints.
@@ -118,6 +121,51 @@ def torch_times(net, x, p, R, q, nt, repeats, chunks):
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
+def detailed_step(g, repeats):
+    """The step of a detailed mesh's fit (float32, width 128, 512 points, scale 40, SOAP):
+    the network's step against its products alone, and the optimiser's update beside it.
+    Small products leave the elementwise passes and the optimiser a larger share than at
+    width 256, so this is where a fit's time goes."""
+    from sns_np.nn.optim import SOAP, Adam
+    from sns_np.surface.fit import _optimizer_options
+
+    n, dtype = 512, np.float32
+    net = ResidualMLP(width=128, depth=8, seed=0, input_scale=40, dtype=dtype)
+    net.W3[...] = g.standard_normal(net.W3.shape).astype(dtype) / 16
+    p = g.standard_normal((n, 3))
+    p /= np.linalg.norm(p, axis=1, keepdims=True)
+    R = sphere_frame(p).astype(dtype)
+    q = (1.1 * p).astype(dtype)
+    nt = p.astype(dtype)
+
+    def step():
+        def loss(y, JD, sl):
+            val, dy, dJD, _ = position_normal_loss(y, JD, q[sl], nt[sl], n, 1.0)
+            return val, dy, dJD
+        return net.value_and_grad(p.astype(dtype), loss, order=1, directions=R)
+
+    reps = 10 * repeats
+    t_step = best_time(step, reps)
+    t_mm = training_matmul_time(net, n, 3, dtype, reps)
+    grad = step()[1]
+    times = {}
+    for name, opt in (("Adam", Adam(lr=1e-3)),
+                      ("SOAP", SOAP(lr=1e-3, **_optimizer_options({"optimizer": "soap"},
+                                                                 net)))):
+        theta = net.pack()
+        for _ in range(20):         # past the first change of basis
+            opt.step(theta, grad)
+
+        def ten(opt=opt, theta=theta):     # ten steps: one change of SOAP's bases
+            for _ in range(10):
+                opt.step(theta, grad)
+        times[name] = best_time(ten, repeats) / 10
+    print(f"detailed fit's step (width 128, {n} points, float32): {t_step * 1e3:6.1f} ms   "
+          f"products alone {t_mm * 1e3:6.1f} ms   efficiency {t_mm / t_step:.2f}; "
+          f"optimiser update: Adam {times['Adam'] * 1e3:.1f} ms, "
+          f"SOAP {times['SOAP'] * 1e3:.1f} ms ({times['SOAP'] / t_step:.2f}x the network's)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repeats, fewer torch variants")
@@ -207,6 +255,8 @@ def main(argv=None):
               f"{t_step2 * 1e3:8.1f} ms   products alone {t_mm_train2 * 1e3:7.1f} ms   "
               f"efficiency {t_mm_train2 / t_step2:.2f}   ({t_step2 / t_step:.2f}x the order-1 "
               f"step)")
+        if dt == np.float32:
+            detailed_step(g, repeats)
         if use_torch:
             tt = torch_times(net, x, p, R, q, nt, repeats,
                              (256,) if args.quick else (128, 256, 512))

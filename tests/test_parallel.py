@@ -4,7 +4,7 @@ deterministic gradients, nested calls, errors from workers, OpenBLAS settings re
 import numpy as np
 import pytest
 
-from sns_np.nn import ResidualMLP, _parallel
+from sns_np.nn import ResidualMLP, _engine, _parallel, release_workspace
 from sns_np.nn import _kernels as K
 
 needs_openblas = pytest.mark.skipif(not _parallel._blas(),
@@ -193,3 +193,72 @@ def test_data_parallel_second_order_gradient_matches(two_workers, monkeypatch):
     l2, g2 = net.value_and_grad(x, loss, order=2, directions=D, second=2)
     assert l1 == pytest.approx(l2, rel=1e-13)
     np.testing.assert_allclose(g1, g2, rtol=1e-11, atol=1e-13 * np.abs(g2).max())
+
+
+def test_workspace_arrays_are_aligned_disjoint_and_nest():
+    ws = _engine._Workspace()
+    shapes = [(3, 5, 7), (1,), (4, 4), (0, 3), (9,)]
+    with ws.arrays(np.float32, *shapes) as outer:
+        assert [a.shape for a in outer] == shapes and ws.level == 1
+        for i, a in enumerate(outer):
+            assert a.dtype == np.float32 and (a.size == 0 or a.ctypes.data % 64 == 0)
+            a[...] = i
+        with ws.arrays(np.float64, (6, 6)) as (inner,):   # a nested call: its own block
+            inner[...] = -1.0
+            assert len(ws.blocks) == 2
+        for i, a in enumerate(outer):                     # nothing overwritten
+            assert (a == i).all()
+    assert ws.level == 0
+    block = ws.blocks[0]
+    with ws.arrays(np.float32, (2, 3)):                   # smaller: the same block again
+        assert ws.blocks[0] is block
+    with ws.arrays(np.float64, (1000, 100)):              # larger: the block grows
+        assert ws.blocks[0].nbytes >= 800_000
+
+
+def test_engine_reuses_its_workspace_and_releases_it():
+    net = make_net(chunk_size=None)
+    x = points(300)
+    q = 1.3 * x
+    D = np.random.default_rng(2).standard_normal((300, 3, 2))
+    l1, g1 = net.value_and_grad(x, _loss(q), order=1, directions=D)
+    held = [b.ctypes.data for b in _engine._workspace.blocks]
+    assert held                                   # the calling thread kept its tape
+    l2, g2 = net.value_and_grad(x, _loss(q), order=1, directions=D)
+    assert [b.ctypes.data for b in _engine._workspace.blocks] == held
+    assert l1 == l2 and np.array_equal(g1, g2)
+    release_workspace()
+    assert _engine._workspace.blocks == [] and _parallel._state["pool"] is None
+    l3, g3 = net.value_and_grad(x, _loss(q), order=1, directions=D)
+    assert l1 == l3 and np.array_equal(g1, g3)
+
+
+@needs_openblas
+def test_a_concurrent_loss_runs_on_two_workers_at_once(two_workers):
+    """With ``concurrent_loss`` the workers' calls overlap (both reach a two-party barrier,
+    which the lock would never let them do), and the result is the locked one, bit for bit."""
+    import threading
+    net = make_net(chunk_size=50)
+    x = points(100)                     # two chunks, one per worker
+    q = 1.3 * x
+    D = np.random.default_rng(2).standard_normal((100, 3, 2))
+    assert _parallel.plan(100, 50) == (2, 50)
+    barrier = threading.Barrier(2, timeout=10)
+    inner = _loss(q)
+
+    def meeting(y, JD, sl):
+        barrier.wait()
+        return inner(y, JD, sl)
+
+    l1, g1 = net.value_and_grad(x, meeting, order=1, directions=D, concurrent_loss=True)
+    l2, g2 = net.value_and_grad(x, _loss(q), order=1, directions=D)
+    assert l1 == l2 and np.array_equal(g1, g2)
+    barrier.reset()
+    quick = threading.Barrier(2, timeout=0.5)
+
+    def alone(y, JD, sl):
+        quick.wait()
+        return inner(y, JD, sl)
+
+    with pytest.raises(threading.BrokenBarrierError):   # the lock: one call at a time
+        net.value_and_grad(x, alone, order=1, directions=D)

@@ -5,8 +5,10 @@ ResidualMLP     the network: forward jets (value, J, D2, directional), reverse-m
 
 Adam, RMSProp, SGD, SOAP, Schedule    optimisers and learning-rate schedules on flat vectors
 scipy_objective                 ``fun(theta) -> (loss, grad)`` for scipy.optimize.minimize
+release_workspace               free the scratch memory the engine keeps between calls
 """
 
+from ._engine import release_workspace
 from .activations import sigmoid, softplus
 from .mlp import ResidualMLP, n_streams
 from .optim import (
@@ -26,4 +28,4 @@ from .optim import (
 
 __all__ = ["ResidualMLP", "n_streams", "softplus", "sigmoid", "Optimizer", "Adam", "RMSProp",
            "SOAP", "SGD", "Schedule", "constant", "cosine", "step", "make_optimizer",
-           "optimizer_class", "scipy_objective"]
+           "optimizer_class", "scipy_objective", "release_workspace"]

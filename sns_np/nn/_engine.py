@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import threading
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -69,6 +70,69 @@ def _biases(net):
 def _grad_views(net, grad):
     """The parameter arrays of a flat gradient (n_params,), as views named like the network's."""
     return {name: grad[sl].reshape(shape) for name, (sl, shape) in net.param_slices().items()}
+
+
+class _Workspace(threading.local):
+    """Scratch memory for the tapes of the BLAS path, kept per thread and reused.
+
+    A training step's tape is megabytes (width 128, 256 points per worker: 16 MB), and a
+    fresh ``np.empty`` of that size is a fresh ``mmap`` whose pages fault in, zero-filled, at
+    their first write: a third of a 512-point step of a detailed fit went to that
+    (docs/performance.md, "The detailed fit's step"). The arrays of a call are carved out of
+    one block per thread and nesting level (a loss function may call the network), which
+    grows to the largest call seen and is kept until the thread ends or
+    :func:`release_workspace` is called.
+    """
+
+    def __init__(self):
+        self.blocks = []
+        self.level = 0
+
+    @contextmanager
+    def arrays(self, dtype, *shapes):
+        """Uninitialised arrays of ``shapes`` in ``dtype``, 64-byte aligned, valid inside
+        the ``with`` (a view keeps its block alive, so a release meanwhile is harmless)."""
+        dt = np.dtype(dtype)
+        sizes = [math.prod(shape) * dt.itemsize for shape in shapes]
+        starts = np.cumsum([0] + [-(-n // 64) * 64 for n in sizes]).tolist()
+        level = self.level
+        if len(self.blocks) <= level:
+            self.blocks.append(np.empty(0, np.uint8))
+        if self.blocks[level].nbytes < starts[-1] + 64:
+            self.blocks[level] = np.empty(starts[-1] + 64, np.uint8)
+        block = self.blocks[level]
+        base = -block.ctypes.data % 64
+        self.level += 1
+        try:
+            yield [block[base + a:base + a + n].view(dt).reshape(shape)
+                   for a, n, shape in zip(starts, sizes, shapes)]
+        finally:
+            self.level -= 1
+
+
+_workspace = _Workspace()
+
+
+def release_workspace():
+    """Free the engine's scratch memory: the calling thread's and, by ending them, that of
+    the worker threads (started again when next needed).
+
+    The engine keeps each thread's largest tape between calls (about 16 MB per worker for a
+    detailed fit's step, 70 MB for the reference network's float64 training step); call this
+    after a fit to return it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sns_np.nn import ResidualMLP, release_workspace
+    >>> net = ResidualMLP(width=64, depth=2, seed=0)
+    >>> y = net.jet(np.eye(3), order=1)[0]      # keeps a tape for the next call
+    >>> release_workspace()
+    >>> bool(np.array_equal(net.jet(np.eye(3), order=1)[0], y))
+    True
+    """
+    _workspace.blocks = []
+    _parallel.shutdown()
 
 
 def _small_layout(a):
@@ -139,33 +203,32 @@ def forward_blas(net, x, D, m, k, Y):
 def forward_chunks(net, x, D, m, k, Y, c, chunks, act):
     """The jet streams of the chunks ``chunks`` (indices of c-point slices of x) into Y.
 
-    ``act`` is the fused softplus jet kernel (threaded or serial); hid, T1, T2 and sig are
-    this call's own scratch, so that several calls can run side by side.
+    ``act`` is the fused softplus jet kernel (threaded or serial); the scratch arrays come
+    from this thread's workspace, so that several calls can run side by side.
     """
     n = x.shape[0]
     S = n_streams(m, k)
     w = net.width
-    bufs = np.empty((3, c, S, w), net.dtype)       # h, and two scratch arrays, rotating
-    sig = np.empty((c, w), net.dtype)
     b0, b1, b2, b3 = _biases(net)
-    for i in chunks:
-        lo, hi = i * c, min(i * c + c, n)
-        r = hi - lo
-        h, t1, t2 = bufs[0, :r], bufs[1, :r], bufs[2, :r]
-        sg = sig[:r]
-        first_layer(net, x[lo:hi], None if D is None else D[lo:hi], m, t1)
-        act(t1, t1, b0, h, sg, m, k, False, net.bias)
-        # a kernel's output never overlaps its inputs ("Aliasing" in _kernels.py): the
-        # block's next h goes to the scratch array that held A, and the two swap roles
-        for blk in range(net.depth):
-            np.matmul(flat(h, r), net.W1[blk].T, out=flat(t1, r))       # U
-            act(t1, t1, b1[blk], t2, sg, m, k, False, net.bias)         # A = s(U)
-            np.matmul(flat(t2, r), net.W2[blk].T, out=flat(t1, r))      # A W2^T
-            act(t1, h, b2[blk], t2, sg, m, k, True, net.bias)           # next h
-            h, t2 = t2, h
-        np.matmul(flat(h, r), net.W3.T, out=Y[lo:hi].reshape(r * S, net.out_dim))
-        if net.bias:
-            Y[lo:hi, 0, :] += b3
+    with _workspace.arrays(net.dtype, (3, c, S, w), (c, w)) as (bufs, sig):
+        for i in chunks:
+            lo, hi = i * c, min(i * c + c, n)
+            r = hi - lo
+            h, t1, t2 = bufs[0, :r], bufs[1, :r], bufs[2, :r]
+            sg = sig[:r]
+            first_layer(net, x[lo:hi], None if D is None else D[lo:hi], m, t1)
+            act(t1, t1, b0, h, sg, m, k, False, net.bias)
+            # a kernel's output never overlaps its inputs ("Aliasing" in _kernels.py): the
+            # block's next h goes to the scratch array that held A, and the two swap roles
+            for blk in range(net.depth):
+                np.matmul(flat(h, r), net.W1[blk].T, out=flat(t1, r))       # U
+                act(t1, t1, b1[blk], t2, sg, m, k, False, net.bias)         # A = s(U)
+                np.matmul(flat(t2, r), net.W2[blk].T, out=flat(t1, r))      # A W2^T
+                act(t1, h, b2[blk], t2, sg, m, k, True, net.bias)           # next h
+                h, t2 = t2, h
+            np.matmul(flat(h, r), net.W3.T, out=Y[lo:hi].reshape(r * S, net.out_dim))
+            if net.bias:
+                Y[lo:hi, 0, :] += b3
 
 
 def features(net, x, chunk_size):
@@ -204,7 +267,7 @@ def unpack_streams(Y, order, m, k):
 
 # ---------------------------------------------------------------------------------- reverse
 
-def value_and_grad(net, x, D, m, loss_fn, k=0):
+def value_and_grad(net, x, D, m, loss_fn, k=0, concurrent=False):
     """Fused forward, loss and backward pass at checked x (n, in_dim): ``(loss, grad)``.
 
     ``D`` (n, in_dim, m) or None (the coordinate axes); m = 0 is the value alone; k > 0 adds
@@ -216,7 +279,7 @@ def value_and_grad(net, x, D, m, loss_fn, k=0):
         return 0.0, grad
     if net.width <= SMALL_WIDTH and k == 0:   # the small kernels stop at first order
         return value_and_grad_small(net, x, D, m, loss_fn, grad)
-    return value_and_grad_blas(net, x, D, m, loss_fn, grad, k)
+    return value_and_grad_blas(net, x, D, m, loss_fn, grad, k, concurrent)
 
 
 def pack_cotangents(dy, dJD, m, n, o, dtype, dD2=None, k=0):
@@ -273,8 +336,9 @@ def value_and_grad_small(net, x, D, m, loss_fn, grad):
     return float(loss), grad
 
 
-def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0):
-    """The BLAS path: chunk after chunk on all threads, or round-robin chunks per worker."""
+def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0, concurrent=False):
+    """The BLAS path: chunk after chunk on all threads, or round-robin chunks per worker
+    (``concurrent``: their calls of ``loss_fn`` may overlap)."""
     n = x.shape[0]
     c = min(chunk_points(net, n_streams(m, k)), n)
     plan = _parallel.plan(n, c)
@@ -290,16 +354,18 @@ def value_and_grad_blas(net, x, D, m, loss_fn, grad, k=0):
     # Whole chunks per worker (_parallel.py), each with its own gradient accumulator.
     # Chunks are dealt round-robin, not on demand, and the accumulators are added in
     # worker order, so that the gradient does not depend on timing. loss_fn is called under
-    # a lock: it never runs concurrently with itself.
+    # a lock, unless the caller says it may run concurrently with itself.
     lock = threading.Lock()
 
     def locked_loss(*args):
         with lock:
             return loss_fn(*args)
 
+    call_loss = loss_fn if concurrent else locked_loss
+
     def work(i):
         g = grad if i == 0 else np.zeros_like(grad)
-        grad_chunks(net, x, D, m, locked_loss, g, c, range(i, n_chunks, workers), losses,
+        grad_chunks(net, x, D, m, call_loss, g, c, range(i, n_chunks, workers), losses,
                     kern.softplus_jet_serial, _back_rule(k, serial=True), k)
         return g
 
@@ -326,9 +392,9 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k
     """Forward, loss and backward pass of the chunks ``chunks``; adds into grad.
 
     The loss of chunk i goes to ``losses[i]``. ``act`` and ``act_back`` are the fused
-    kernels (threaded or serial; :func:`_back_rule`); the tape is this call's own. With
-    k > 0 the streams include the second derivatives along the pairs of the first k
-    directions, and ``act_back`` must be the second-order rule.
+    kernels (threaded or serial; :func:`_back_rule`); the tape comes from this thread's
+    workspace. With k > 0 the streams include the second derivatives along the pairs of the
+    first k directions, and ``act_back`` must be the second-order rule.
     """
     n = x.shape[0]
     S = n_streams(m, k)
@@ -337,78 +403,68 @@ def grad_chunks(net, x, D, m, loss_fn, grad, c, chunks, losses, act, act_back, k
     # the tape, reused for every chunk: hid[blk] is the input of block blk (hid[depth] feeds
     # the read-out), U, A the inner pre-activation and activation, Zt the block's
     # pre-activation; SG* the sigmoids of the value streams
-    Z0 = np.empty((c, S, w), dt)
-    SG0 = np.empty((c, w), dt)
-    hid = np.empty((depth + 1, c, S, w), dt)
-    U = np.empty((depth, c, S, w), dt)
-    SGU = np.empty((depth, c, w), dt)
-    A = np.empty((depth, c, S, w), dt)
-    Zt = np.empty((depth, c, S, w), dt)
-    SGZ = np.empty((depth, c, w), dt)
-    Y = np.empty((c, S, o), dt)
-    hbar = np.empty((c, S, w), dt)
-    zbar = np.empty((c, S, w), dt)
-    abar = np.empty((c, S, w), dt)
-    ubar = np.empty((c, S, w), dt)
-    tmp = np.empty((c, S, w), dt)
+    tape = _workspace.arrays(
+        dt, (c, S, w), (c, w), (depth + 1, c, S, w), (depth, c, S, w), (depth, c, w),
+        (depth, c, S, w), (depth, c, S, w), (depth, c, w), (c, S, o), *[(c, S, w)] * 5)
     gv = _grad_views(net, grad)
     b0, b1, b2, b3 = _biases(net)
-    for i in chunks:
-        lo, hi = i * c, min(i * c + c, n)
-        r = hi - lo
-        rows = r * S
-        Dc = None if D is None else D[lo:hi]
-        # forward, keeping the tape
-        first_layer(net, x[lo:hi], Dc, m, Z0[:r])
-        act(Z0[:r], Z0[:r], b0, hid[0, :r], SG0[:r], m, k, False, net.bias)
-        for blk in range(depth):
-            np.matmul(flat(hid[blk], r), net.W1[blk].T, out=flat(U[blk], r))
-            act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, k, False,
-                net.bias)
-            np.matmul(flat(A[blk], r), net.W2[blk].T, out=flat(Zt[blk], r))
-            act(Zt[blk, :r], hid[blk, :r], b2[blk], hid[blk + 1, :r], SGZ[blk, :r], m, k, True,
-                net.bias)
-            if k:   # the forward rule adds the residual to the second-order streams on the
-                # fly; the backward rule needs the complete pre-activations on the tape
-                Zt[blk, :r, 1 + m:] += hid[blk, :r, 1 + m:]
-        np.matmul(flat(hid[depth], r), net.W3.T, out=flat(Y, r))
-        if net.bias:
-            Y[:r, 0, :] += b3
-        y = Y[:r, 0, :]
-        JD = np.swapaxes(Y[:r, 1:1 + m, :], 1, 2) if m else None
-        if k:
-            D2D = unpack_streams(Y[:r], 2, m, k)[2]
-            loss, dy, dJD, dD2 = loss_fn(y, JD, D2D, slice(lo, hi))
-        else:
-            loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
-            dD2 = None
-        losses[i] = float(loss)
-        Ybar = pack_cotangents(dy, dJD, m, r, o, dt, dD2, k)
-        # backward
-        Yb = Ybar.reshape(rows, o)
-        gv["W3"] += Yb.T @ flat(hid[depth], r)
-        if net.bias:
-            gv["b3"] += Ybar[:, 0, :].sum(axis=0)
-        np.matmul(Yb, net.W3, out=flat(hbar, r))
-        for blk in range(depth - 1, -1, -1):
-            # hbar: of the block's output h; zbar, abar, ubar: of its Zt, A and U
-            act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], zbar[:r], m)
-            gv["W2"][blk] += flat(zbar, r).T @ flat(A[blk], r)
+    with tape as (Z0, SG0, hid, U, SGU, A, Zt, SGZ, Y, hbar, zbar, abar, ubar, tmp):
+        for i in chunks:
+            lo, hi = i * c, min(i * c + c, n)
+            r = hi - lo
+            rows = r * S
+            Dc = None if D is None else D[lo:hi]
+            # forward, keeping the tape
+            first_layer(net, x[lo:hi], Dc, m, Z0[:r])
+            act(Z0[:r], Z0[:r], b0, hid[0, :r], SG0[:r], m, k, False, net.bias)
+            for blk in range(depth):
+                np.matmul(flat(hid[blk], r), net.W1[blk].T, out=flat(U[blk], r))
+                act(U[blk, :r], U[blk, :r], b1[blk], A[blk, :r], SGU[blk, :r], m, k, False,
+                    net.bias)
+                np.matmul(flat(A[blk], r), net.W2[blk].T, out=flat(Zt[blk], r))
+                act(Zt[blk, :r], hid[blk, :r], b2[blk], hid[blk + 1, :r], SGZ[blk, :r], m, k, True,
+                    net.bias)
+                if k:   # the forward rule adds the residual to the second-order streams on the
+                    # fly; the backward rule needs the complete pre-activations on the tape
+                    Zt[blk, :r, 1 + m:] += hid[blk, :r, 1 + m:]
+            np.matmul(flat(hid[depth], r), net.W3.T, out=flat(Y, r))
             if net.bias:
-                gv["b2"][blk] += zbar[:r, 0, :].sum(axis=0)
-            np.matmul(flat(zbar, r), net.W2[blk], out=flat(abar, r))
-            act_back(U[blk, :r], SGU[blk, :r], abar[:r], ubar[:r], m)
-            gv["W1"][blk] += flat(ubar, r).T @ flat(hid[blk], r)
-            if net.bias:
-                gv["b1"][blk] += ubar[:r, 0, :].sum(axis=0)
-            np.matmul(flat(ubar, r), net.W1[blk], out=flat(tmp, r))
-            np.add(zbar[:r], tmp[:r], out=hbar[:r])       # the residual path and the block's
-        act_back(Z0[:r], SG0[:r], hbar[:r], zbar[:r], m)
-        gv["W0"] += zbar[:r, 0, :].T @ x[lo:hi]
-        for a in range(m):
-            if Dc is None:
-                gv["W0"][:, a] += zbar[:r, 1 + a, :].sum(axis=0)
+                Y[:r, 0, :] += b3
+            y = Y[:r, 0, :]
+            JD = np.swapaxes(Y[:r, 1:1 + m, :], 1, 2) if m else None
+            if k:
+                D2D = unpack_streams(Y[:r], 2, m, k)[2]
+                loss, dy, dJD, dD2 = loss_fn(y, JD, D2D, slice(lo, hi))
             else:
-                gv["W0"] += zbar[:r, 1 + a, :].T @ Dc[:, :, a]
-        if net.bias:
-            gv["b0"] += zbar[:r, 0, :].sum(axis=0)
+                loss, dy, dJD = loss_fn(y, JD, slice(lo, hi))
+                dD2 = None
+            losses[i] = float(loss)
+            Ybar = pack_cotangents(dy, dJD, m, r, o, dt, dD2, k)
+            # backward
+            Yb = Ybar.reshape(rows, o)
+            gv["W3"] += Yb.T @ flat(hid[depth], r)
+            if net.bias:
+                gv["b3"] += Ybar[:, 0, :].sum(axis=0)
+            np.matmul(Yb, net.W3, out=flat(hbar, r))
+            for blk in range(depth - 1, -1, -1):
+                # hbar: of the block's output h; zbar, abar, ubar: of its Zt, A and U
+                act_back(Zt[blk, :r], SGZ[blk, :r], hbar[:r], zbar[:r], m)
+                gv["W2"][blk] += flat(zbar, r).T @ flat(A[blk], r)
+                if net.bias:
+                    gv["b2"][blk] += zbar[:r, 0, :].sum(axis=0)
+                np.matmul(flat(zbar, r), net.W2[blk], out=flat(abar, r))
+                act_back(U[blk, :r], SGU[blk, :r], abar[:r], ubar[:r], m)
+                gv["W1"][blk] += flat(ubar, r).T @ flat(hid[blk], r)
+                if net.bias:
+                    gv["b1"][blk] += ubar[:r, 0, :].sum(axis=0)
+                np.matmul(flat(ubar, r), net.W1[blk], out=flat(tmp, r))
+                np.add(zbar[:r], tmp[:r], out=hbar[:r])       # the residual path and the block's
+            act_back(Z0[:r], SG0[:r], hbar[:r], zbar[:r], m)
+            gv["W0"] += zbar[:r, 0, :].T @ x[lo:hi]
+            for a in range(m):
+                if Dc is None:
+                    gv["W0"][:, a] += zbar[:r, 1 + a, :].sum(axis=0)
+                else:
+                    gv["W0"] += zbar[:r, 1 + a, :].T @ Dc[:, :, a]
+            if net.bias:
+                gv["b0"] += zbar[:r, 0, :].sum(axis=0)

@@ -147,6 +147,15 @@ def _pool(size):
     return _state["pool"]
 
 
+def shutdown():
+    """End the worker threads (a new pool is started when next needed); waits for a running
+    parallel section to finish first."""
+    with _lock:
+        if _state["pool"] is not None:
+            _state["pool"].shutdown(wait=True)
+        _state["pool"], _state["pool_size"] = None, 0
+
+
 def _as_worker(fn, *args):
     before = inside_worker()
     _local.active = True

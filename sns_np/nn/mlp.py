@@ -582,7 +582,8 @@ class ResidualMLP:
         check_finite(a, name)
         return a.astype(self.dtype, copy=False)
 
-    def value_and_grad(self, x, loss_fn, order=1, directions=None, second=None):
+    def value_and_grad(self, x, loss_fn, order=1, directions=None, second=None,
+                       concurrent_loss=False):
         """Fused forward, loss and backward pass, chunk by chunk (the training step).
 
         Parameters
@@ -594,8 +595,8 @@ class ResidualMLP:
             returns the chunk's loss contribution and its cotangents (``dJD`` may be None).
             The total loss is the sum of the contributions, so a mean over all n points must
             divide by n inside ``loss_fn``. On the data-parallel path the chunks are run by
-            worker threads in no fixed order: calls never overlap (they hold a lock), but
-            ``loss_fn`` must not rely on the order of the slices.
+            worker threads in no fixed order: calls never overlap (they hold a lock, unless
+            ``concurrent_loss``), but ``loss_fn`` must not rely on the order of the slices.
             At order 2 it is ``loss_fn(y, JD, D2D, sl) -> (loss, dy, dJD, dD2D)``, with the
             second derivatives D2D (c, out_dim, k, k) as :meth:`jet` returns them and their
             cotangent (may be None); ``D2D`` is symmetric, so only ``dD2D + dD2D^T`` counts.
@@ -604,6 +605,10 @@ class ResidualMLP:
         second : int, optional
             With ``directions`` and order 2: second derivatives along the pairs of the first
             ``second`` directions only (as in :meth:`jet`).
+        concurrent_loss : bool
+            True: ``loss_fn`` is safe to call from several threads at once, and the workers
+            call it without the lock (a loss that searches the nearest points of a mesh then
+            overlaps its search with the other workers' products). The result is the same.
 
         Returns
         -------
@@ -624,5 +629,6 @@ class ResidualMLP:
         x = self._check_x(x)
         order = check_order(order)
         D, m, k = self._streams(order, directions, second, x.shape[0])
-        return _engine.value_and_grad(self, x, D, m, loss_fn, k)
+        return _engine.value_and_grad(self, x, D, m, loss_fn, k,
+                                      concurrent=bool(concurrent_loss))
 

@@ -557,7 +557,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                         R = np.concatenate([R, p[:, :, None]], axis=2)
                     pc = p.astype(t_dtype)
                     qc, ntc = q.astype(t_dtype), nt.astype(t_dtype)
-                    parts = {"position": 0.0, "normal": 0.0}
+                    parts = {}      # slice start -> its (position, normal) sums
                     JTc = JT.astype(t_dtype) if wj else None
                     STc = ST.astype(t_dtype) if wh else None
 
@@ -585,8 +585,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                                                             sample_weight=sw)
                             val += val_j
                             dJD = dJD_j if dJD is None else dJD + dJD_j
-                        parts["position"] += pr["position"]
-                        parts["normal"] += pr["normal"]
+                        parts[sl.start] = (pr["position"], pr["normal"])
                         if errors is not None:
                             errors[sl] = pr["pointwise"]
                         return val, dy, dJD
@@ -602,10 +601,12 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                         dJD3[:, :, 2] = dJp
                         return val + val_h, dy, dJD3, dD2D
 
+                    # the loss is safe to run on several chunks at once: the nearest-point
+                    # search of one worker overlaps the other's products
                     loss, grad = net.value_and_grad(
                         pc, loss_fn2 if wh else loss_fn, order=order,
                         directions=None if R is None else R.astype(t_dtype),
-                        second=2 if wh else None)
+                        second=2 if wh else None, concurrent_loss=True)
                     if not np.isfinite(loss) or not np.all(np.isfinite(grad)):
                         stopped = "diverged"
                         # the parameters are still those of the last good step: save them
@@ -628,8 +629,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                             _ridge_readout(net, target, rng)
                     updating = False
                     last_loss = loss
-                    pos_ms = parts["position"] / len(p)
-                    nrm_ms = parts["normal"] / len(p)
+                    pos_ms = sum(parts[k][0] for k in sorted(parts)) / len(p)
+                    nrm_ms = sum(parts[k][1] for k in sorted(parts)) / len(p)
                     ema_pos = pos_ms if ema_pos is None else 0.95 * ema_pos + 0.05 * pos_ms
                     ema_nrm = nrm_ms if ema_nrm is None else 0.95 * ema_nrm + 0.05 * nrm_ms
                     pos_rms = float(np.sqrt(ema_pos))
