@@ -229,6 +229,13 @@ def test_engine_reuses_its_workspace_and_releases_it():
     assert l1 == l2 and np.array_equal(g1, g2)
     release_workspace()
     assert _engine._workspace.blocks == [] and _parallel._state["pool"] is None
+
+    def releasing(y, JD, sl):           # from inside a call, even inside a worker: harmless
+        release_workspace()
+        return _loss(q)(y, JD, sl)
+
+    l4, g4 = net.value_and_grad(x, releasing, order=1, directions=D)
+    assert l1 == l4 and np.array_equal(g1, g4)
     l3, g3 = net.value_and_grad(x, _loss(q), order=1, directions=D)
     assert l1 == l3 and np.array_equal(g1, g3)
 

@@ -96,7 +96,7 @@ class _Workspace(threading.local):
         sizes = [math.prod(shape) * dt.itemsize for shape in shapes]
         starts = np.cumsum([0] + [-(-n // 64) * 64 for n in sizes]).tolist()
         level = self.level
-        if len(self.blocks) <= level:
+        while len(self.blocks) <= level:
             self.blocks.append(np.empty(0, np.uint8))
         if self.blocks[level].nbytes < starts[-1] + 64:
             self.blocks[level] = np.empty(starts[-1] + 64, np.uint8)
@@ -132,7 +132,8 @@ def release_workspace():
     True
     """
     _workspace.blocks = []
-    _parallel.shutdown()
+    if not _parallel.inside_worker():    # a worker cannot end its own pool
+        _parallel.shutdown()
 
 
 def _small_layout(a):

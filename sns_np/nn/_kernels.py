@@ -33,7 +33,7 @@ exp(-708) ~ 3e-308 (an absolute error below 1e-307 on softplus and sigmoid).
 Float32 streams (training) get the same formulas in float32 arithmetic with shorter
 polynomials (:func:`_softplus_sigmoid32`, relative error below 3e-7): twice the lanes and
 half the terms; the choice is made by type when a kernel is compiled
-(:func:`_softplus_parts`). The float32 forward pass of a training step's rows costs 40% less
+(:func:`_softplus_parts`). The float32 forward rule of a training step costs 45% less
 (docs/performance.md).
 
 Aliasing
@@ -187,7 +187,7 @@ def _softplus_sigmoid(z, p, fb, a, sig, s2):
 @njit(inline="always", **_JIT)
 def _softplus_sigmoid32(z, p, ib, a, sig, s2):
     """:func:`_exp_parts` and :func:`_softplus_sigmoid` in float32 arithmetic, for float32 z:
-    a degree-7 polynomial for exp(-|z|) and seven terms of the odd series for log1p, enough
+    a degree-7 polynomial for exp(-|z|) and eight terms of the odd series for log1p, enough
     for float32 (relative error below 3e-7, a few units in the last place). ``ib`` is
     int64 scratch of z's length, used as int32 bits."""
     fz = -_F(_FLUSH_Z32)
