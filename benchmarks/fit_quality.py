@@ -163,7 +163,7 @@ def nearest_parameters(S, X, n_dense=100_000):
 
 def mesh_fidelity(S, V, F, n=20000, n_dense=100_000):
     """Two-sided mean distance (relative to the bbox diagonal) and normal angle at the
-    closest mesh point; None without libigl."""
+    closest mesh point, means over the surface's area; None without libigl."""
     try:
         import igl  # noqa: F401
     except ImportError:
@@ -172,11 +172,20 @@ def mesh_fidelity(S, V, F, n=20000, n_dense=100_000):
     diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
     dq = differential_quantities(S, uniform_sphere(n, rng=5))
     d, ang = _against_mesh(dq.x, dq.n, V, F)
+    # means over the fitted surface's area (uniform sphere points, each weighted by its area
+    # element), whatever the parametrisation; the mesh's side, over its vertices
+    w = dq.area_element / dq.area_element.sum()
     d_back = np.linalg.norm(S(nearest_parameters(S, V, n_dense)) - V, axis=1)
-    return {"surface_to_mesh": float(d.mean() / diag),
+    return {"surface_to_mesh": float(w @ d / diag),
             "mesh_to_surface": float(d_back.mean() / diag),
-            "dist": float((d.mean() + d_back.mean()) / (2 * diag)),
-            "nrm": float(ang.mean()), "nrm_median": float(np.median(ang))}
+            "dist": float((w @ d + d_back.mean()) / (2 * diag)),
+            "nrm": float(w @ ang), "nrm_median": _weighted_median(ang, w)}
+
+
+def _weighted_median(x, w):
+    """The median of the values ``x`` with weights ``w`` (summing to 1)."""
+    o = np.argsort(x)
+    return float(x[o][np.searchsorted(np.cumsum(w[o]), 0.5)])
 
 
 def loop_reference(V, F, levels=2, n=20000):

@@ -111,6 +111,51 @@ def test_sampler_state_round_trip_draws_the_same(target):
         b.load_state_dict(bad)
 
 
+def test_stratified_draw_gives_each_cell_its_share_and_a_calmer_batch(target):
+    g = np.random.default_rng(2)
+    strat, iid = (ErrorSampler(target, batch=64, stratified=b) for b in (True, False))
+    prob = target.face_area * g.uniform(0.2, 2.0, len(target.face_area))
+    for s in (strat, iid):
+        s._set_probabilities(prob / prob.sum())
+    n = 1000
+    # one point per slice of the cumulative probability: every stretch of the cells' curve,
+    # and so every cell, gets its share n P(c) to within one point either side
+    counts = {}
+    for name, s in (("strat", strat), ("iid", iid)):
+        s.sample(n, g)
+        counts[name] = np.bincount(s._cells, minlength=s.n_cells)
+        s.observe(np.zeros(n))
+    assert np.abs(counts["strat"] - n * strat.prob).max() < 2.0
+    assert np.abs(counts["iid"] - n * iid.prob).max() > 2.0
+    # so a batch's weighted mean of a smooth function scatters much less about the area mean
+    spread = {}
+    for name, s in (("strat", strat), ("iid", iid)):
+        means = []
+        for _ in range(200):
+            p, q, nrm, w = s.sample(256, g)
+            s.observe(np.zeros(256))
+            means.append((w * q[:, 2] ** 2).mean())
+        spread[name] = np.std(means)
+    assert spread["strat"] < 0.5 * spread["iid"]
+    with pytest.raises(ValueError, match="stratified must be True or False"):
+        ErrorSampler(target, batch=64, stratified="yes")
+
+
+def test_morton_order_walks_through_neighbours():
+    from sns_np.mesh import icosphere
+    from sns_np.surface._adaptive import morton_order
+    V, _ = icosphere(4)                 # 2,562 points, edges about 0.08 long
+    o = morton_order(V)
+    assert sorted(o.tolist()) == list(range(len(V)))
+    # consecutive points along the curve are mostly neighbours; in a random order they are
+    # a sphere's width apart
+    step = np.median(np.linalg.norm(np.diff(V[o], axis=0), axis=1))
+    scattered = np.median(np.linalg.norm(np.diff(V[np.random.default_rng(1).permutation(
+        len(V))], axis=0), axis=1))
+    assert step < 0.1 < 1.0 < scattered
+    assert np.array_equal(morton_order(np.zeros((3, 3))), [0, 1, 2])   # a degenerate cube
+
+
 @pytest.mark.slow_nojit
 def test_fit_with_error_sampling_resumes_exactly(tmp_path):
     """With a quarter of each batch at the vertices: the draw on the faces and at the

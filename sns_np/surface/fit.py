@@ -103,6 +103,7 @@ class FitReport:
     normal_max_deg: float = float("nan")
     #: a mesh only, independent of the parametrisation: held-out mean distance from the
     #: surface to the mesh, and angle to the mesh's interpolated normal at the nearest point
+    #: (means over the surface's area)
     distance_mean: float = float("nan")
     closest_normal_mean_deg: float = float("nan")
     history: dict = field(default_factory=dict)
@@ -774,10 +775,13 @@ def _evaluate(surface, target, n_eval):
                        bbox_diagonal=target.bbox_diagonal, normal_mean_deg=float(ang.mean()),
                        normal_max_deg=float(ang.max()))
     if hasattr(target, "nearest"):      # a mesh: the geometry, whatever the parametrisation
+        # means over the surface's area: each point weighted by its area element, so that
+        # the way the sphere is spread over the surface does not weight the result
+        dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1)
+        w = dA / dA.sum()
         face, beta, d = target.nearest().query(y)
-        report.distance_mean = float(d.mean())
-        report.closest_normal_mean_deg = float(_angle(n, target.corr.to_mesh(face, beta)[1])
-                                               .mean())
+        report.distance_mean = float(w @ d)
+        report.closest_normal_mean_deg = float(w @ _angle(n, target.corr.to_mesh(face, beta)[1]))
     return report
 
 
