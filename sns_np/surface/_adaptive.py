@@ -133,9 +133,9 @@ class ErrorSampler:
             raise ValueError(f"decay must be in (0, 1), got {decay}")
         if int(every) < 1:
             raise ValueError(f"every must be an integer >= 1, got {every}")
-        self.target = target
         if not isinstance(stratified, (bool, np.bool_)):
             raise ValueError(f"stratified must be True or False, got {stratified!r}")
+        self.target = target
         self.mix, self.decay, self.every = float(mix), float(decay), int(every)
         self.stratified = bool(stratified)
         areas = np.asarray(target.face_area, dtype=np.float64)

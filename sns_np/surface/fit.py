@@ -778,7 +778,8 @@ def _evaluate(surface, target, n_eval):
         # means over the surface's area: each point weighted by its area element, so that
         # the way the sphere is spread over the surface does not weight the result
         dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1)
-        w = dA / dA.sum()
+        total = dA.sum()
+        w = dA / total if np.isfinite(total) and total > 0 else np.full(len(dA), 1 / len(dA))
         face, beta, d = target.nearest().query(y)
         report.distance_mean = float(w @ d)
         report.closest_normal_mean_deg = float(w @ _angle(n, target.corr.to_mesh(face, beta)[1]))
