@@ -514,7 +514,7 @@ def test_mesh_figures_are_means_over_the_surface_area():
     assert dilated.closest_normal_mean_deg == pytest.approx(plain.closest_normal_mean_deg,
                                                             rel=0.03)
     # while a plain mean over the sphere's points would not be: the dilation crowds them
-    # towards the north pole, where |z| is largest
+    # towards the south pole, where |z| is largest
     p = np.random.default_rng(0).standard_normal((20000, 3))
     z = _Bulged(3.0)(p)[:, 2]
     assert np.abs(0.05 * z).mean() > 1.3 * 0.025
