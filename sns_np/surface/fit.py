@@ -30,7 +30,7 @@ from .._validation import (
     check_choice,
 )
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
-from ..geometry import tangent_frame, tangent_jacobian
+from ..geometry import area_element_from_jets, tangent_frame, tangent_jacobian
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import make_optimizer
 from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constants, re-exported)
@@ -777,7 +777,7 @@ def _evaluate(surface, target, n_eval):
     if hasattr(target, "nearest"):      # a mesh: the geometry, whatever the parametrisation
         # means over the surface's area: each point weighted by its area element, so that
         # the way the sphere is spread over the surface does not weight the result
-        dA = np.linalg.norm(np.cross(JR[:, :, 0], JR[:, :, 1]), axis=1)
+        dA = area_element_from_jets(JR)
         total = dA.sum()
         w = dA / total if np.isfinite(total) and total > 0 else np.full(len(dA), 1 / len(dA))
         face, beta, d = target.nearest().query(y)
