@@ -23,7 +23,10 @@ Pipeline (:func:`spherical_embedding`):
    map towards an equiareal one by reweighted Tutte solves in stereographic charts, and a
    density-equalising flow (:func:`~sns_np.mesh.equalise.equalise_areas`, Gastner & Newman
    2004 on the sphere) evens out what is left at the scale of a fixed grid. Both keep the map
-   fold-free. By default the candidate (conformal, stretch, stretch + density) with the
+   fold-free. The stretch minimisation runs twice, accepting detours of its spread up to
+   1.1 and up to 1.5 times the best (``STRETCH_TOLERANCES``), and keeps the better: the strict
+   run stalls on long thin limbs (a horse's legs), the patient one overshoots on others (the
+   armadillo). By default the candidate (conformal, stretch, stretch + density) with the
    smallest 99th-percentile stretch of the sphere-to-surface map is returned.
 
 References
@@ -270,6 +273,13 @@ def _stretch_p99(V, F, P, area):
 
 BALANCE = ("auto", "none", "stretch", "density")
 
+#: the stretch minimisation's tolerances (how far above the best spread a step may go), tried
+#: in turn; the result with the smaller 99th-percentile stretch is kept. 1.1 alone stalled on
+#: the horse (48,485 vertices decimated to 20,000: 4 accepted steps, stretch p99 233, its
+#: legs at e^-11 of their share of the sphere); 1.5 reaches 17.6 there and 22 instead of 8.5
+#: on the armadillo (docs/fitting.md, "Held-out meshes")
+STRETCH_TOLERANCES = (1.1, 1.5)
+
 
 def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
                         max_steps: int = 300, round_tol: float = 5e-3,
@@ -379,9 +389,15 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
     candidates = {base: P}
     n_stretch = n_density = 0
     if balance != "none":
-        Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations, repair=repair)
-        candidates["stretch"], n_stretch = Ps, info["accepted"]
-        say(f"stretch minimisation: {n_stretch} steps, log area ratio std {info['spread']:.2f}")
+        tried = []
+        for tol in STRETCH_TOLERANCES:
+            Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations,
+                                        tolerance=tol, repair=repair)
+            tried.append((_stretch_p99(V, F, Ps, area)[0], Ps, info["accepted"]))
+            say(f"stretch minimisation (tolerance {tol:g}): {info['accepted']} steps, log "
+                f"area ratio std {info['spread']:.2f}, stretch p99 {tried[-1][0]:.2f}")
+        _, Ps, n_stretch = min(tried, key=lambda t: t[0])
+        candidates["stretch"] = Ps
         if balance in ("auto", "density"):
             Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
             candidates["density"], n_density = Pd, info["steps"]
