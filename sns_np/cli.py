@@ -480,8 +480,12 @@ def _cmd_info(args):
               f"{fit.get('normal_mean_deg'):.3f} deg")
         dist, nrm = fit.get("distance_relative"), fit.get("closest_normal_mean_deg")
         if isinstance(dist, float) and math.isfinite(dist) and isinstance(nrm, float):
-            print(f"  against the mesh: distance {dist:.2e} of the bbox diagonal, normal error "
-                  f"{nrm:.3f} deg at the nearest point")
+            vd, diag = fit.get("vertex_distance_mean"), fit.get("bbox_diagonal")
+            back = (f" (its vertices to the surface {vd / diag:.2e})"
+                    if isinstance(vd, float) and math.isfinite(vd) and isinstance(diag, float)
+                    and diag > 0 else "")
+            print(f"  against the mesh: distance {dist:.2e} of the bbox diagonal{back}, normal "
+                  f"error {nrm:.3f} deg at the nearest point")
         opts = fit.get("options", {})
         if opts:
             print(f"  fit options: {_printable(json.dumps(opts))}")

@@ -506,11 +506,17 @@ def test_mesh_figures_are_means_over_the_surface_area():
     from sns_np.surface.fit import _evaluate
 
     V, F = icosphere(5)
+    V = V @ np.linalg.qr(np.random.default_rng(1).standard_normal((3, 3)))[0]  # off the poles
     target = _MeshTarget(V, F, Vs=V, check=False, verbose=False)
     plain, dilated = (_evaluate(_Bulged(k), target, 20000) for k in (1.0, 3.0))
     # the distance to the unit sphere is about |a z|: 0.025 over the area
     assert plain.distance_mean == pytest.approx(0.025, rel=0.05)
     assert dilated.distance_mean == pytest.approx(plain.distance_mean, rel=0.03)
+    # and from the mesh's vertices (on the unit sphere, nearly uniform) to the surface
+    for r in (plain, dilated):
+        assert r.vertex_distance_mean == pytest.approx(0.025, rel=0.05)
+        assert r.two_sided_distance_relative == pytest.approx(
+            0.5 * (r.distance_mean + r.vertex_distance_mean) / r.bbox_diagonal)
     assert dilated.closest_normal_mean_deg == pytest.approx(plain.closest_normal_mean_deg,
                                                             rel=0.03)
     # while a plain mean over the sphere's points would not be: the dilation crowds them
@@ -518,3 +524,24 @@ def test_mesh_figures_are_means_over_the_surface_area():
     p = np.random.default_rng(0).standard_normal((20000, 3))
     z = _Bulged(3.0)(p)[:, 2]
     assert np.abs(0.05 * z).mean() > 1.3 * 0.025
+
+
+def test_vertex_distances_match_the_exact_distances_and_show_a_skipped_feature():
+    """The report's vertices-to-surface distances: Gauss-Newton from each vertex's own sphere
+    point reaches the exact distance to an ellipsoid (closed-form foot points), and a vertex
+    that the surface does not come near keeps its distance."""
+    from sns_np.demo import ellipsoid_foot_point
+    from sns_np.surface.fit import vertex_distances
+
+    g = np.random.default_rng(3)
+    p = sphere_points(400, seed=3)
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    X = E(p) * (1 + 0.03 * g.standard_normal((400, 1)))        # near the surface
+    d = vertex_distances(E, X, p)
+    exact = np.linalg.norm(X - ellipsoid_foot_point(X), axis=1)
+    assert np.abs(d - exact).max() < 1e-6
+    X[0] = 3.0 * E(p[:1])[0]                                   # a spike the surface skips
+    far = vertex_distances(E, X, p)[0]
+    # never below the distance (every point met is on the surface), and far from it
+    assert far >= np.linalg.norm(X[0] - ellipsoid_foot_point(X[:1])[0]) - 1e-12
+    assert far > 1.0
