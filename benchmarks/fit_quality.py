@@ -176,8 +176,6 @@ def mesh_fidelity(S, V, F, n=20000, n_dense=100_000, Vs=None):
     """Two-sided mean distance (relative to the bbox diagonal) and normal angle at the
     closest mesh point, means over the surface's area; None without libigl. ``Vs``: the
     mesh's embedding, a second start of the vertices' projections (``nearest_parameters``)."""
-
-
     try:
         import igl  # noqa: F401
     except ImportError:

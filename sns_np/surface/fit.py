@@ -842,7 +842,8 @@ def vertex_distances(surface, X, p, iterations=4):
         R = tangent_frame(p)
         JR = tangent_jacobian(J, R)
         G = np.einsum("kia,kib->kab", JR, JR)
-        G += (1e-12 * np.trace(G, axis1=1, axis2=2))[:, None, None] * np.eye(2)
+        # a tiny ridge: a degenerate point (S_u x S_v = 0) takes a step, not an error
+        G += (1e-12 * np.trace(G, axis1=1, axis2=2) + 1e-300)[:, None, None] * np.eye(2)
         d = np.linalg.solve(G, np.einsum("kia,ki->ka", JR, r)[..., None])[..., 0]
         p = p + np.einsum("kab,kb->ka", R, d)
         p /= np.linalg.norm(p, axis=1, keepdims=True)
