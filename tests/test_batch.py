@@ -126,6 +126,9 @@ def test_batch_with_a_bad_mesh_reproducible_and_rerun_skips(meshes, tmp_path, cl
     with limit_threads(1):
         S_direct, _ = fit_mesh(*load(meshes / "egg.obj"), progress=False, **TINY)
     assert np.array_equal(S_batch.net.pack(), S_direct.net.pack())
+    fit = S_batch.metadata["fit"]                # the row carries the model's own figures
+    assert t[0]["two_sided_distance_relative"] == fit["two_sided_distance_relative"]
+    assert fit["two_sided_distance_relative"] != fit["distance_relative"]   # both sides
     # a rerun skips complete outputs and fits nothing again
     stamp = (out / "egg.npz").stat().st_mtime_ns
     again = fit_many(paths, out, client=client, progress=False, **TINY)

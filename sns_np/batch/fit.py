@@ -19,7 +19,7 @@ __all__ = ["fit_many", "FIT_COLUMNS"]
 #: the columns of a fit summary, in order
 FIT_COLUMNS = ["name", "status", "message", "seconds", "steps", "stopped", "fit_seconds",
                "position_mean", "position_relative", "normal_mean_deg", "distance_relative",
-               "closest_normal_mean_deg", "resumed_from",
+               "two_sided_distance_relative", "closest_normal_mean_deg", "resumed_from",
                "threads", "worker", "output", "mesh"]
 
 #: options the batch sets itself for every fit
@@ -50,6 +50,7 @@ def _fit_figures(metadata):
             "position_relative": fit.get("position_relative"),
             "normal_mean_deg": fit.get("normal_mean_deg"),
             "distance_relative": fit.get("distance_relative"),
+            "two_sided_distance_relative": fit.get("two_sided_distance_relative"),
             "closest_normal_mean_deg": fit.get("closest_normal_mean_deg")}
 
 
