@@ -211,6 +211,32 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     assert S.net.dtype == np.float64 and len(r.history["loss"]) == 6
 
 
+def test_fit_shape_closes_with_the_least_squares_translation():
+    """An analytic map's fit ends by translating its output by the mean residual: the position
+    term's least-squares translation, which moves nothing but the position."""
+    E = Ellipsoid(2.0, 2.6, 1.4)
+    S, r = fit_shape(E, steps=40, **dict(TINY, width=24, depth=2, lr=3e-3))
+    t = np.array(r.translation)
+    assert t.shape == (3,) and S.metadata["fit"]["translation"] == r.translation
+    raw = SphericalNeuralSurface(S.net, center=S.center - t, scale=S.scale)  # as trained
+    from sns_np.surface._targets import _ShapeTarget
+    from sns_np.surface.fit import closing_translation
+    assert np.array_equal(closing_translation(raw, _ShapeTarget(E)), t)
+    # at independent points: the mean residual is gone, to the statistical error of the
+    # two means, and with it the squared error's share |mean|^2
+    p = sphere_points(20000, seed=5)
+    res_raw, res = E.jet(p, 0) - raw(p), E.jet(p, 0) - S(p)
+    sigma = np.sqrt((res ** 2).sum(1).mean())
+    noise = 4 * sigma * np.sqrt(1 / 20000 + 1 / 65536)
+    assert np.linalg.norm(res_raw.mean(0)) > 2 * noise
+    assert np.linalg.norm(res.mean(0)) < noise
+    assert (res ** 2).sum(1).mean() < (res_raw ** 2).sum(1).mean()
+    # derivatives, so normals and curvature at the same parameter, do not move
+    y0, J0, H0 = raw.jet(p[:50], 2)
+    y1, J1, H1 = S.jet(p[:50], 2)
+    assert np.allclose(y1 - y0, t) and np.array_equal(J0, J1) and np.array_equal(H0, H1)
+
+
 def test_normal_weight_follows_the_parametrisation():
     """Auto: 0.1 for an analytic map (exact parametrisation), 1 for a mesh (an embedding);
     an explicit weight is kept. All recorded in the report's options and choices."""
@@ -449,6 +475,7 @@ def test_closest_phase_is_a_mesh_option_and_is_recorded():
     assert 0.0 < r.distance_mean <= r.position_max
     assert 0.0 < r.closest_normal_mean_deg < 90.0
     assert "against the mesh: distance" in r.summary()
+    assert r.translation == []                     # no closing translation for a mesh
     _, r = fit_mesh(V, F, steps=2, **{k: v for k, v in TINY.items() if k != "input_scale"})
     assert r.options["closest_after"] == 1.0 and "smooth" in r.choices["closest_after"]["why"]
 

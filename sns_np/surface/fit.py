@@ -110,6 +110,10 @@ class FitReport:
     #: a mesh only: mean distance from the mesh's vertices to the surface (each projected
     #: from its own sphere point), the side that shows a feature the surface skips
     vertex_distance_mean: float = float("nan")
+    #: an analytic map only: the translation added to the network's output after training,
+    #: the least-squares one of the position term (:func:`closing_translation`), in the
+    #: surface's units; empty for any other target
+    translation: list = field(default_factory=list)
     history: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     #: what the options left to "auto" became, and why (option -> {"value", "why"})
@@ -712,7 +716,13 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 
     surface = SphericalNeuralSurface(net.astype(np.float64), center=target.center,
                                      scale=target.scale, metadata=dict(metadata or {}))
+    translation = None
+    if getattr(target, "parametrisation", None) == "exact":
+        translation = closing_translation(surface, target)
+        surface.center = surface.center + translation
     report = _evaluate(surface, target, o["n_eval"])
+    if translation is not None:
+        report.translation = [float(t) for t in translation]
     report.steps, report.seconds, report.stopped = step, seconds, stopped
     report.final_loss = float(last_loss)
     report.history = {k: np.asarray(v) for k, v in history.items()}
@@ -780,6 +790,49 @@ def _check_early(options):
                 f"a step of this network takes about {per_step * 1e3:.0f} ms here, so "
                 f"{o.steps} steps need about {o.steps * per_step:.0f} s; pass only one "
                 f"of them (time_budget alone sizes the step count to fit)")
+
+
+#: sphere points of :func:`closing_translation`'s mean (its statistical error is the
+#: residual's RMS over 256)
+TRANSLATION_POINTS = 65_536
+
+
+def closing_translation(surface, target, n=TRANSLATION_POINTS):
+    """The translation that minimises the position term of a fit to an exact map.
+
+    The position term is ``mean |S(p) - T(p)|^2`` over the sphere's measure, and a
+    translation ``t`` of the output minimises it at ``t = mean (T(p) - S(p))``, estimated at
+    ``n`` fresh uniform sphere points (seeded apart from training and evaluation). The network
+    has no output bias, so a constant offset can only be made, slowly, out of its features;
+    the derivative terms do not see it at all. A translation changes no derivative: normals
+    and curvature at the same parameter are unchanged, only the position moves
+    (docs/fitting.md, "The closing translation"). Meaningless for a mesh's embedding, whose
+    parametrisation carries its own tangential error (a mesh fit ends on the distance to the
+    mesh itself, where the offset is already negligible).
+
+    Parameters
+    ----------
+    surface : callable, (n, 3) sphere points -> (n, 3) points: the fitted surface
+    target : an exact target (``evaluate_at(p) -> (q, normals)`` in the normalised frame,
+        ``center``, ``scale``)
+    n : int, number of sphere points
+
+    Returns
+    -------
+    (3,) float array, in the surface's units: add it to ``surface.center``.
+
+    Examples
+    --------
+    >>> from sns_np.shapes import Sphere
+    >>> from sns_np.surface._targets import _ShapeTarget
+    >>> target = _ShapeTarget(Sphere(1.0))
+    >>> moved = lambda p: Sphere(1.0)(p) + [0.1, 0.0, 0.0]      # the sphere, 0.1 along x
+    >>> np.round(closing_translation(moved, target), 6) + 0.0
+    array([-0.1,  0. ,  0. ])
+    """
+    p = uniform_sphere(n, np.random.default_rng(2**31 - 2))
+    q, _ = target.evaluate_at(p)
+    return np.mean(target.center + target.scale * q - surface(p), axis=0)
 
 
 def _evaluate(surface, target, n_eval):
