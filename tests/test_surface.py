@@ -211,19 +211,26 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     assert S.net.dtype == np.float64 and len(r.history["loss"]) == 6
 
 
-def test_fit_shape_closes_with_the_least_squares_translation():
-    """An analytic map's fit ends by translating its output by the mean residual: the position
-    term's least-squares translation, which moves nothing but the position."""
+def test_fit_shape_closes_with_the_least_squares_affine_map():
+    """An analytic map's fit ends with the affine map of its output that minimises the
+    position term: in the centre and the read-out, moving the derivatives by M only."""
+    from sns_np.surface._targets import _ShapeTarget
+    from sns_np.surface.fit import closing_map
+
     E = Ellipsoid(2.0, 2.6, 1.4)
     S, r = fit_shape(E, steps=40, **dict(TINY, width=24, depth=2, lr=3e-3))
-    t = np.array(r.translation)
-    assert t.shape == (3,) and S.metadata["fit"]["translation"] == r.translation
-    raw = SphericalNeuralSurface(S.net, center=S.center - t, scale=S.scale)  # as trained
-    from sns_np.surface._targets import _ShapeTarget
-    from sns_np.surface.fit import closing_translation
-    assert np.array_equal(closing_translation(raw, _ShapeTarget(E)), t)
-    # at independent points: the mean residual is gone, to the statistical error of the
-    # two means, and with it the squared error's share |mean|^2
+    t, M = np.array(r.closing_map["translation"]), np.array(r.closing_map["matrix"])
+    assert t.shape == (3,) and M.shape == (3, 3)
+    assert S.metadata["fit"]["closing_map"] == r.closing_map
+    # the network as trained: undo the map (centre and read-out)
+    raw_net = S.net.copy()
+    raw_net.W3[...] = np.linalg.solve(M, S.net.W3)
+    raw = SphericalNeuralSurface(raw_net, center=np.linalg.solve(M, S.center - t),
+                                 scale=S.scale)
+    t2, M2 = closing_map(raw, _ShapeTarget(E))
+    assert np.allclose(t2, t, atol=1e-12) and np.allclose(M2, M, atol=1e-12)
+    # at independent points the squared error is lower, and the residual has lost its
+    # constant part (to the statistical error of the two estimates)
     p = sphere_points(20000, seed=5)
     res_raw, res = E.jet(p, 0) - raw(p), E.jet(p, 0) - S(p)
     sigma = np.sqrt((res ** 2).sum(1).mean())
@@ -231,10 +238,13 @@ def test_fit_shape_closes_with_the_least_squares_translation():
     assert np.linalg.norm(res_raw.mean(0)) > 2 * noise
     assert np.linalg.norm(res.mean(0)) < noise
     assert (res ** 2).sum(1).mean() < (res_raw ** 2).sum(1).mean()
-    # derivatives, so normals and curvature at the same parameter, do not move
+    # the derivatives are M times the network's: M is near the identity
+    assert np.abs(M - np.eye(3)).max() < 0.05
     y0, J0, H0 = raw.jet(p[:50], 2)
     y1, J1, H1 = S.jet(p[:50], 2)
-    assert np.allclose(y1 - y0, t) and np.array_equal(J0, J1) and np.array_equal(H0, H1)
+    assert np.allclose(y1, t + y0 @ M.T)
+    assert np.allclose(J1, np.einsum("ij,kj...->ki...", M, J0))
+    assert np.allclose(H1, np.einsum("ij,kj...->ki...", M, H0))
 
 
 def test_normal_weight_follows_the_parametrisation():
@@ -475,7 +485,7 @@ def test_closest_phase_is_a_mesh_option_and_is_recorded():
     assert 0.0 < r.distance_mean <= r.position_max
     assert 0.0 < r.closest_normal_mean_deg < 90.0
     assert "against the mesh: distance" in r.summary()
-    assert r.translation == []                     # no closing translation for a mesh
+    assert r.closing_map == {}                     # no closing map for a mesh
     _, r = fit_mesh(V, F, steps=2, **{k: v for k, v in TINY.items() if k != "input_scale"})
     assert r.options["closest_after"] == 1.0 and "smooth" in r.choices["closest_after"]["why"]
 

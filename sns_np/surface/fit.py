@@ -110,10 +110,10 @@ class FitReport:
     #: a mesh only: mean distance from the mesh's vertices to the surface (each projected
     #: from its own sphere point), the side that shows a feature the surface skips
     vertex_distance_mean: float = float("nan")
-    #: an analytic map only: the translation added to the network's output after training,
-    #: the least-squares one of the position term (:func:`closing_translation`), in the
-    #: surface's units; empty for any other target
-    translation: list = field(default_factory=list)
+    #: an analytic map only: the affine map ``y -> t + M y`` applied to the output after
+    #: training, the position term's least-squares one (:func:`closing_map`), as
+    #: ``{"translation": t, "matrix": M}`` in the surface's units; empty for any other target
+    closing_map: dict = field(default_factory=dict)
     history: dict = field(default_factory=dict)
     options: dict = field(default_factory=dict)
     #: what the options left to "auto" became, and why (option -> {"value", "why"})
@@ -200,6 +200,10 @@ class FitReport:
                                   if np.isfinite(self.vertex_distance_mean) else "")
                    + f", normal error {self.closest_normal_mean_deg:.3f} deg at the "
                    f"nearest point" if np.isfinite(self.distance_mean) else "")
+                + (f"; closing affine map: translation "
+                   f"{np.linalg.norm(self.closing_map['translation']):.3g}, |M - I| "
+                   f"{np.abs(np.subtract(self.closing_map['matrix'], np.eye(3))).max():.3g}"
+                   if self.closing_map else "")
                 + "".join(f"\nnote: {n}" for n in self.notes))
 
     def to_json(self) -> dict:
@@ -716,13 +720,15 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 
     surface = SphericalNeuralSurface(net.astype(np.float64), center=target.center,
                                      scale=target.scale, metadata=dict(metadata or {}))
-    translation = None
+    affine = None
     if getattr(target, "parametrisation", None) == "exact":
-        translation = closing_translation(surface, target)
-        surface.center = surface.center + translation
+        affine = closing_map(surface, target)
+        t, M = affine
+        surface.net.W3[...] = M @ surface.net.W3
+        surface.center = t + M @ surface.center
     report = _evaluate(surface, target, o["n_eval"])
-    if translation is not None:
-        report.translation = [float(t) for t in translation]
+    if affine is not None:
+        report.closing_map = {"translation": affine[0].tolist(), "matrix": affine[1].tolist()}
     report.steps, report.seconds, report.stopped = step, seconds, stopped
     report.final_loss = float(last_loss)
     report.history = {k: np.asarray(v) for k, v in history.items()}
@@ -792,23 +798,24 @@ def _check_early(options):
                 f"of them (time_budget alone sizes the step count to fit)")
 
 
-#: sphere points of :func:`closing_translation`'s mean (its statistical error is the
-#: residual's RMS over 256)
-TRANSLATION_POINTS = 65_536
+#: sphere points of :func:`closing_map`'s least squares
+CLOSING_POINTS = 65_536
 
 
-def closing_translation(surface, target, n=TRANSLATION_POINTS):
-    """The translation that minimises the position term of a fit to an exact map.
+def closing_map(surface, target, n=CLOSING_POINTS):
+    """The affine map of the output that minimises the position term of a fit to an exact map.
 
-    The position term is ``mean |S(p) - T(p)|^2`` over the sphere's measure, and a
-    translation ``t`` of the output minimises it at ``t = mean (T(p) - S(p))``, estimated at
-    ``n`` fresh uniform sphere points (seeded apart from training and evaluation). The network
-    has no output bias, so a constant offset can only be made, slowly, out of its features;
-    the derivative terms do not see it at all. A translation changes no derivative: normals
-    and curvature at the same parameter are unchanged, only the position moves
-    (docs/fitting.md, "The closing translation"). Meaningless for a mesh's embedding, whose
-    parametrisation carries its own tangential error (a mesh fit ends on the distance to the
-    mesh itself, where the offset is already negligible).
+    The position term is ``mean |S(p) - T(p)|^2`` over the sphere's measure; ``(t, M)``
+    minimises ``mean |t + M S(p) - T(p)|^2``, by least squares at ``n`` fresh uniform sphere
+    points (seeded apart from training and evaluation). Both are free to apply: ``t`` goes
+    into the output's centre and ``M`` into the read-out layer (``W3 -> M W3``). The network
+    has no output bias, and the derivative terms, whose weights dwarf the position's, hold
+    its read-out where they want it: a fit ends with its surface shifted and slightly
+    strained as a whole, by a few 1e-4 of its size (docs/fitting.md, "The closing affine
+    map"). ``M`` is within about 1e-3 of the identity, so the derivatives, normals and
+    curvature move by about as little; the position error loses its constant and linear
+    parts. Not used for a mesh: the parametrisation of its embedding carries its own
+    tangential error, and a mesh fit ends on the distance to the mesh itself.
 
     Parameters
     ----------
@@ -819,20 +826,27 @@ def closing_translation(surface, target, n=TRANSLATION_POINTS):
 
     Returns
     -------
-    (3,) float array, in the surface's units: add it to ``surface.center``.
+    t : (3,) float array, M : (3, 3) float array, in the surface's units: the corrected
+    surface is ``t + M S(p)``.
 
     Examples
     --------
-    >>> from sns_np.shapes import Sphere
+    >>> from sns_np.shapes import Ellipsoid
     >>> from sns_np.surface._targets import _ShapeTarget
-    >>> target = _ShapeTarget(Sphere(1.0))
-    >>> moved = lambda p: Sphere(1.0)(p) + [0.1, 0.0, 0.0]      # the sphere, 0.1 along x
-    >>> np.round(closing_translation(moved, target), 6) + 0.0
-    array([-0.1,  0. ,  0. ])
+    >>> E = Ellipsoid(1.0, 1.3, 0.7)
+    >>> moved = lambda p: 1.01 * E(p) + [0.1, 0.0, 0.0]     # E grown by 1%, moved along x
+    >>> t, M = closing_map(moved, _ShapeTarget(E))
+    >>> bool(np.allclose(M, np.eye(3) / 1.01) and np.allclose(t, [-0.1 / 1.01, 0, 0]))
+    True
     """
     p = uniform_sphere(n, np.random.default_rng(2**31 - 2))
     q, _ = target.evaluate_at(p)
-    return np.mean(target.center + target.scale * q - surface(p), axis=0)
+    y, T = surface(p), target.center + target.scale * q
+    mean = y.mean(axis=0)
+    X = np.concatenate([np.ones((len(p), 1)), y - mean], axis=1)
+    coef = np.linalg.lstsq(X, T, rcond=None)[0]
+    M = coef[1:].T
+    return coef[0] - M @ mean, M
 
 
 def _evaluate(surface, target, n_eval):
