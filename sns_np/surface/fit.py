@@ -292,7 +292,10 @@ def fit_shape(shape, **options):
     Sphere points are drawn uniformly (for a detailed map, where the recent error is, with
     importance weights: ``sampling``); targets are ``shape(p)``, its exact normals and its
     first and second derivatives along the sphere (``jacobian_weight``,
-    ``hessian_weight``).
+    ``hessian_weight``). The fit ends with the affine map of the output that minimises the
+    position term (:func:`closing_map`: a shift and a strain of a few 1e-4 that the
+    network, which has no output bias, does not remove by itself), recorded in
+    ``report.closing_map``.
     Options as :func:`fit_sampler`. Returns (surface, report).
 
     Examples
