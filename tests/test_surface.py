@@ -203,6 +203,8 @@ def test_fit_shape_reduces_error_and_reports_in_input_units():
     _, r_ridge = fit_shape(E, steps=1, **dict(TINY, width=24, depth=2))
     S, r = fit_shape(E, steps=300, **dict(TINY, width=24, depth=2, lr=3e-3))
     assert r_ridge.position_mean < 0.1 * r_random.position_mean  # the warm start helps
+    # one step from a random start is far from the shape: its closing map is no refit
+    assert r_random.closing_map["matrix"] == np.eye(3).tolist()
     assert r.steps == 300 and r.stopped == "step budget"
     assert r.position_mean < 0.6 * r_ridge.position_mean        # and training improves on it
     p = sphere_points(200, seed=3)

@@ -803,6 +803,9 @@ def _check_early(options):
 
 #: sphere points of :func:`closing_map`'s least squares
 CLOSING_POINTS = 65_536
+#: the largest strain ``|M - I|`` (spectral norm) :func:`closing_map` applies: a correction of
+#: a finished fit is a few 1e-4; beyond this it would be refitting the surface
+CLOSING_STRAIN_MAX = 1e-2
 
 
 def closing_map(surface, target, n=CLOSING_POINTS):
@@ -812,13 +815,16 @@ def closing_map(surface, target, n=CLOSING_POINTS):
     minimises ``mean |t + M S(p) - T(p)|^2``, by least squares at ``n`` fresh uniform sphere
     points (seeded apart from training and evaluation). Both are free to apply: ``t`` goes
     into the output's centre and ``M`` into the read-out layer (``W3 -> M W3``). The network
-    has no output bias, and the derivative terms, whose weights dwarf the position's, hold
-    its read-out where they want it: a fit ends with its surface shifted and slightly
-    strained as a whole, by a few 1e-4 of its size (docs/fitting.md, "The closing affine
-    map"). ``M`` is within about 1e-3 of the identity, so the derivatives, normals and
-    curvature move by about as little; the position error loses its constant and linear
-    parts. Not used for a mesh: the parametrisation of its embedding carries its own
-    tangential error, and a mesh fit ends on the distance to the mesh itself.
+    has no output bias, and the derivative terms do not see a shift and pull the read-out
+    towards their own optimum: a fit ends with its surface shifted and slightly strained as
+    a whole, by a few 1e-4 of its size (docs/fitting.md, "The closing affine map"). ``M``
+    is then within about 1e-3 of the identity, so the derivatives, normals and curvature
+    move by about as little, while the position error loses its constant and linear parts.
+    Where the least-squares ``M`` is further than ``CLOSING_STRAIN_MAX`` from the identity
+    (a fit of a few steps, far from its target) it would be refitting the surface, not
+    correcting it: ``M`` is then the identity and ``t`` the mean residual. Not used for a
+    mesh: the parametrisation of its embedding carries its own tangential error, and a mesh
+    fit ends on the distance to the mesh itself.
 
     Parameters
     ----------
@@ -841,6 +847,9 @@ def closing_map(surface, target, n=CLOSING_POINTS):
     >>> t, M = closing_map(moved, _ShapeTarget(E))
     >>> bool(np.allclose(M, np.eye(3) / 1.01) and np.allclose(t, [-0.1 / 1.01, 0, 0]))
     True
+    >>> t, M = closing_map(lambda p: 1.5 * E(p), _ShapeTarget(E))   # a strain of 1/3
+    >>> bool(np.array_equal(M, np.eye(3)))                          # is not a correction
+    True
     """
     p = uniform_sphere(n, np.random.default_rng(2**31 - 2))
     q, _ = target.evaluate_at(p)
@@ -849,6 +858,8 @@ def closing_map(surface, target, n=CLOSING_POINTS):
     X = np.concatenate([np.ones((len(p), 1)), y - mean], axis=1)
     coef = np.linalg.lstsq(X, T, rcond=None)[0]
     M = coef[1:].T
+    if not np.linalg.norm(M - np.eye(3), 2) <= CLOSING_STRAIN_MAX:      # NaN too
+        return (T - y).mean(axis=0), np.eye(3)
     return coef[0] - M @ mean, M
 
 
