@@ -152,10 +152,15 @@ def test_jacobian_weight_is_chosen_for_an_analytic_map_and_fits_its_derivatives(
     opts = dict(TINY, width=16, steps=150, lr=3e-3)
     S0, r0 = fit_shape(E, jacobian_weight=0.0, **opts)
     S1, r1 = fit_shape(E, **opts)                       # the default for an analytic map
-    assert r1.options["jacobian_weight"] == JACOBIAN_WEIGHT["exact"] == 1.0
+    assert r1.options["jacobian_weight"] == JACOBIAN_WEIGHT["exact"] == 0.1
     assert "exact data" in r1.choices["jacobian_weight"]["why"]
     assert "jacobian_weight" not in r0.choices          # given, so not chosen
-    assert _tangent_jacobian_error(S1, E) < 0.7 * _tangent_jacobian_error(S0, E)
+    S2, _ = fit_shape(E, jacobian_weight=1.0, **opts)
+    # the term fits the derivatives, more so the larger its weight (at 150 steps: 0.77 and
+    # 0.52 of the error without it measured)
+    err0 = _tangent_jacobian_error(S0, E)
+    assert _tangent_jacobian_error(S1, E) < 0.9 * err0
+    assert _tangent_jacobian_error(S2, E) < 0.7 * err0
 
 
 def _sphere_hessian_error(S, shape, n=2000):

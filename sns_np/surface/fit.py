@@ -369,20 +369,22 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         Weight of the loss on the derivatives along the sphere, ``|dS(e_u) - dS_t(e_u)|^2 +
         |dS(e_v) - dS_t(e_v)|^2`` (:func:`~sns_np.surface.losses.jacobian_loss`), for a
         target with exact derivatives (``sample_jet``: an analytic map). Default
-        (``JACOBIAN_WEIGHT``): 1 for an analytic map, where it cuts the curvature error
+        (``JACOBIAN_WEIGHT``): 0.1 for an analytic map, where it cuts the curvature error
         severalfold for a second jet of the map per step (the network's derivatives are
-        those the normal term already needs); 0
-        for a mesh, whose derivatives are its embedding's, and any other target (a mesh
-        refuses a positive weight).
+        those the normal term already needs; at weight 1 the position led less, and the
+        curvature at the closest point of the map was worse); 0 for a mesh, whose
+        derivatives are its embedding's, and any other target (a mesh refuses a positive
+        weight).
     hessian_weight : float
         Weight of the loss on the second derivatives along the sphere, ``sum_ab |S_ab -
         T_ab|^2`` with ``S_ab = D2S(e_a, e_b) - delta_ab dS(p)``
         (:func:`~sns_np.surface.losses.hessian_loss`), for a target with exact derivatives.
-        Default (``HESSIAN_WEIGHT``): 1e-3 for an analytic map: a step costs about twice as
-        much (the engine's reverse mode through second-order jets), and with the same time
-        the curvature error still ends 1.5-1.9 times lower on FLOWER and TREE (BOBBLE level);
-        0 for any other target (a mesh refuses a positive weight). Larger weights trade
-        position for second derivatives.
+        Default (``HESSIAN_WEIGHT``): 1e-4 for an analytic map (a hundredth of the Jacobian
+        weight, as at 1 and 1e-3 before): a step costs about twice as much (the engine's
+        reverse mode through second-order jets), and with the same time the curvature error
+        still ends lower (1.5-1.9 times on FLOWER and TREE when measured at 1e-3); 0 for any
+        other target (a mesh refuses a positive weight). Larger weights trade position for
+        second derivatives.
     dtype : {"float32", "float64"}
         Training precision (the result is float64).
     init : {"ridge", "random"}
