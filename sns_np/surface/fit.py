@@ -379,7 +379,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         Weight of the loss on the second derivatives along the sphere, ``sum_ab |S_ab -
         T_ab|^2`` with ``S_ab = D2S(e_a, e_b) - delta_ab dS(p)``
         (:func:`~sns_np.surface.losses.hessian_loss`), for a target with exact derivatives.
-        Default (``HESSIAN_WEIGHT``): 1e-4 for an analytic map (a hundredth of the Jacobian
+        Default (``HESSIAN_WEIGHT``): 1e-4 for an analytic map (a thousandth of the Jacobian
         weight, as at 1 and 1e-3 before): a step costs about twice as much (the engine's
         reverse mode through second-order jets), and with the same time the curvature error
         still ends lower (1.5-1.9 times on FLOWER and TREE when measured at 1e-3); 0 for any
