@@ -245,8 +245,10 @@ def test_fit_shape_closes_with_the_least_squares_affine_map():
     assert np.linalg.norm(res_raw.mean(0)) > 2 * noise
     assert np.linalg.norm(res.mean(0)) < noise
     assert (res ** 2).sum(1).mean() < (res_raw ** 2).sum(1).mean()
-    # the derivatives are M times the network's: M is near the identity
-    assert np.abs(M - np.eye(3)).max() < 0.05
+    # a strain (5e-3 here), within what a correction may be; the derivatives are M times
+    # the network's
+    from sns_np.surface.fit import CLOSING_STRAIN_MAX
+    assert 1e-3 < np.linalg.norm(M - np.eye(3), 2) <= CLOSING_STRAIN_MAX
     y0, J0, H0 = raw.jet(p[:50], 2)
     y1, J1, H1 = S.jet(p[:50], 2)
     assert np.allclose(y1, t + y0 @ M.T)
