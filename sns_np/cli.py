@@ -486,16 +486,14 @@ def _cmd_info(args):
                     and diag > 0 else "")
             print(f"  against the mesh: distance {dist:.2e} of the bbox diagonal{back}, normal "
                   f"error {nrm:.3f} deg at the nearest point")
-        closing = fit.get("closing_map")
+        closing = fit.get("closing_readout")
         if isinstance(closing, dict) and closing:
-            t, M = closing.get("translation"), closing.get("matrix")
             try:
-                strain = max(abs(float(M[i][j]) - (i == j)) for i in range(3) for j in range(3))
-                print(f"  closing affine map (the position term's least squares): translation "
-                      f"{[round(float(x), 9) for x in t]}, largest entry of matrix - I "
-                      f"{strain:.3g}")
-            except (TypeError, ValueError, IndexError, KeyError):
-                print(f"  closing affine map: {_printable(closing)}")
+                t = [round(float(x), 9) for x in closing["translation"]]
+                print(f"  closing read-out (the position term's least squares): translation "
+                      f"{t}, read-out change {float(closing['readout_change']):.3g}")
+            except (TypeError, ValueError, KeyError):
+                print(f"  closing read-out: {_printable(closing)}")
         opts = fit.get("options", {})
         if opts:
             print(f"  fit options: {_printable(json.dumps(opts))}")
