@@ -726,7 +726,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 
     surface = SphericalNeuralSurface(net.astype(np.float64), center=target.center,
                                      scale=target.scale, metadata=dict(metadata or {}))
-    closing = None
+    closing = {}
     if getattr(target, "parametrisation", None) == "exact":
         dW, t = closing_readout(surface, target)
         closing = {"translation": t.tolist(),
@@ -734,8 +734,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         surface.net.W3[...] += dW
         surface.center = surface.center + t
     report = _evaluate(surface, target, o["n_eval"])
-    if closing is not None:
-        report.closing_readout = closing
+    report.closing_readout = closing
     report.steps, report.seconds, report.stopped = step, seconds, stopped
     report.final_loss = float(last_loss)
     report.history = {k: np.asarray(v) for k, v in history.items()}
@@ -864,11 +863,14 @@ def closing_readout(surface, target, n=CLOSING_POINTS):
     """
     p = uniform_sphere(n, np.random.default_rng(2**31 - 2))
     q, _ = target.evaluate_at(p)
-    r = (target.center + target.scale * q - surface(p)) / surface.scale
-    F = np.hstack([surface.net.features(p).astype(np.float64), np.ones((n, 1))])
+    net = surface.net
+    h = net.features(p).astype(np.float64)                  # S(p) = c + s (W3 h(p) + b3)
+    y = surface.center + surface.scale * (h @ net.W3.T + (net.b3 if net.bias else 0.0))
+    r = (target.center + target.scale * q - y) / surface.scale
+    F = np.hstack([h, np.ones((n, 1))])
     coef = np.linalg.lstsq(F, r, rcond=None)[0]
     dW, t = coef[:-1].T, surface.scale * coef[-1]
-    if not np.linalg.norm(dW) <= CLOSING_CHANGE_MAX * np.linalg.norm(surface.net.W3):  # NaN
+    if not np.linalg.norm(dW) <= CLOSING_CHANGE_MAX * np.linalg.norm(net.W3):  # NaN too
         return np.zeros_like(dW), surface.scale * r.mean(axis=0)
     return dW, t
 
