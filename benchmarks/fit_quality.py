@@ -111,10 +111,10 @@ def _is_mesh_file(case):
 
 
 def fit_options(args):
-    keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "input_scale",
-            "normal_weight", "smooth", "creases", "sampling", "optimizer", "vertex_fraction",
-            "jacobian_weight", "hessian_weight", "closest_after", "anchor_weight",
-            "closest_normal_weight")
+    keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "lr_min",
+            "input_scale", "normal_weight", "smooth", "creases", "sampling", "optimizer",
+            "vertex_fraction", "jacobian_weight", "hessian_weight", "tangent_weight",
+            "closest_after", "anchor_weight", "closest_normal_weight")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -500,9 +500,10 @@ def main(argv=None):
                          f"followed by mesh cases, or models followed by saved models "
                          f"(default: all)")
     for name, typ in (("width", int), ("depth", int), ("steps", int), ("batch", int),
-                      ("lr", float), ("time-budget", float), ("input-scale", float),
-                      ("normal-weight", float), ("vertex-fraction", float),
-                      ("jacobian-weight", float), ("hessian-weight", float),
+                      ("lr", float), ("lr-min", float), ("time-budget", float),
+                      ("input-scale", float), ("normal-weight", float),
+                      ("vertex-fraction", float), ("jacobian-weight", float),
+                      ("hessian-weight", float), ("tangent-weight", float),
                       ("closest-after", float), ("anchor-weight", float),
                       ("closest-normal-weight", float)):
         ap.add_argument(f"--{name}", type=typ)
