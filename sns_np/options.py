@@ -236,6 +236,13 @@ SAMPLINGS = ("area", "error")
 #: 1 against 3.66e-3 at 0.1, and H at the closest point 117% against 57%).
 NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 
+#: the final learning rate of the cosine schedule that "auto" chooses, by how the target is
+#: parametrised. An analytic map's targets are exact, and the last steps at a rate ten times
+#: lower end nearer them (FLOWER, 540 s: held-out position 6.5e-5 -> 5.6e-5, mean H error at
+#: the closest point 4.25% -> 3.67%; docs/fitting.md, "The paper's shapes"); a mesh's keep
+#: the rate their figures were measured with.
+LR_MIN = {"embedding": 1e-5, "exact": 1e-6}
+
 #: the normal weight of the nearest-point phase that "auto" chooses: ``CLOSEST_NORMAL_AREA``
 #: times the mesh's mean face area (normalised units, total 4 pi), at most
 #: ``CLOSEST_NORMAL_MAX``. The term then counts a normal error theta as the position error
@@ -367,8 +374,10 @@ class FitOptions(Options):
                                Int(1), resume=True)
     lr: float | None = option(None, f"peak learning rate (default: {_auto('lr')})", Real(),
                               resume=True)
-    lr_min: float = option(1e-5, "final learning rate of the cosine schedule",
-                           Real(allow_zero=True), resume=True)
+    lr_min: float | None = option(
+        None, f"final learning rate of the cosine schedule (default: {LR_MIN['embedding']:g} "
+        f"for a mesh, {LR_MIN['exact']:g} for an analytic map)", Real(allow_zero=True),
+        resume=True)
     optimizer: str | None = option(
         None, f"optimiser; soap: Adam in the eigenbasis of Shampoo's factors for the hidden "
         f"matrices (default: {_auto('optimizer')})", Choice("adam", "rmsprop", "sgd", "soap"),

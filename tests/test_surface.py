@@ -11,6 +11,7 @@ from sns_np.options import (
     COARSE_CLOSEST_NORMAL,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
+    LR_MIN,
     NORMAL_WEIGHT,
 )
 from sns_np.shapes import Ellipsoid
@@ -277,6 +278,22 @@ def test_normal_weight_follows_the_parametrisation():
     unknown = type("Target", (), {"parametrisation": "something else"})()
     _plan(unknown, o, net=None)
     assert o["normal_weight"] == NORMAL_WEIGHT["embedding"]
+
+
+def test_final_learning_rate_follows_the_parametrisation():
+    """Auto: lr_min 1e-6 for an analytic map, 1e-5 for a mesh; an explicit one is kept. The
+    cosine schedule ends there: the last step's rate in the report's history."""
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    _, r = fit_shape(E, steps=40, warmup=0, history_every=1, **TINY)
+    assert r.options["lr_min"] == LR_MIN["exact"] == 1e-6
+    assert "exact" in r.choices["lr_min"]["why"]
+    lr = r.history["lr"]
+    assert lr[0] == pytest.approx(1e-4) and lr[-1] < 1e-6 + 1e-4 * 0.01   # cos decay, step 39 of 40
+    V, F = E.mesh(2)
+    _, r = fit_mesh(V, F, steps=2, **TINY)
+    assert r.options["lr_min"] == LR_MIN["embedding"] == 1e-5
+    _, r = fit_shape(E, steps=2, lr_min=3e-5, **TINY)
+    assert r.options["lr_min"] == 3e-5 and "lr_min" not in r.choices
 
 
 @pytest.mark.slow_nojit

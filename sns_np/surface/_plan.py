@@ -19,6 +19,7 @@ from ..options import (
     DETAIL_RANGE,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
+    LR_MIN,
     NORMAL_WEIGHT,
 )
 from ..sampling import uniform_sphere
@@ -232,6 +233,14 @@ def _plan(target, o, net, elapsed=0.0):
             "why": "an exact parametrisation (an analytic map): the position term leads"
                    if kind == "exact" else "a parametrisation through a spherical embedding: "
                    "the normals steer the fit past its tangential noise"}
+    if o["lr_min"] is None:
+        kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
+        o["lr_min"] = LR_MIN[kind]
+        choices["lr_min"] = {
+            "value": o["lr_min"],
+            "why": "an exact parametrisation (an analytic map): the last steps at a lower "
+                   "rate end nearer its exact targets" if kind == "exact" else
+                   "a parametrisation through a spherical embedding"}
     for name, (auto, what) in DERIVATIVE_WEIGHTS.items():
         if o[name] is None:
             o[name] = auto["exact" if exact else "embedding"]
