@@ -114,6 +114,19 @@ NO_JACOBIAN = ("{}={:g} needs a target with exact derivatives along the sphere "
                "(fit_shape, an analytic map); a mesh's are those of its piecewise-linear "
                "spherical embedding, not data to match: use 0")
 
+#: the options chosen by how the target is parametrised: their values and the reasons
+BY_PARAMETRISATION = {
+    "normal_weight": (NORMAL_WEIGHT, {
+        "exact": "an exact parametrisation (an analytic map): the position term leads",
+        "embedding": "a parametrisation through a spherical embedding: the normals steer the "
+                     "fit past its tangential noise"}),
+    "lr_min": (LR_MIN, {
+        "exact": "an exact parametrisation (an analytic map): the last steps at a lower rate "
+                 "end nearer its exact targets",
+        "embedding": "a parametrisation through a spherical embedding: the rate its figures "
+                     "were measured with"}),
+}
+
 #: the options of the losses on an analytic map's derivatives, and what they match
 DERIVATIVE_WEIGHTS = {"jacobian_weight": (JACOBIAN_WEIGHT, "derivatives"),
                       "hessian_weight": (HESSIAN_WEIGHT, "second derivatives")}
@@ -224,23 +237,12 @@ def _plan(target, o, net, elapsed=0.0):
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")
                           + (_closest_why(v) if k == "closest_after" else "")
                           + (_OPTIMIZER_WHY[v] if k == "optimizer" else "")}
-    if o["normal_weight"] is None:
-        # "exact" for an analytic map; anything else is parametrised like a mesh
-        kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
-        o["normal_weight"] = NORMAL_WEIGHT[kind]
-        choices["normal_weight"] = {
-            "value": o["normal_weight"],
-            "why": "an exact parametrisation (an analytic map): the position term leads"
-                   if kind == "exact" else "a parametrisation through a spherical embedding: "
-                   "the normals steer the fit past its tangential noise"}
-    if o["lr_min"] is None:
-        kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
-        o["lr_min"] = LR_MIN[kind]
-        choices["lr_min"] = {
-            "value": o["lr_min"],
-            "why": "an exact parametrisation (an analytic map): the last steps at a lower "
-                   "rate end nearer its exact targets" if kind == "exact" else
-                   "a parametrisation through a spherical embedding"}
+    # "exact" for an analytic map; anything else is parametrised like a mesh
+    kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
+    for name, (auto, why) in BY_PARAMETRISATION.items():
+        if o[name] is None:
+            o[name] = auto[kind]
+            choices[name] = {"value": o[name], "why": why[kind]}
     for name, (auto, what) in DERIVATIVE_WEIGHTS.items():
         if o[name] is None:
             o[name] = auto["exact" if exact else "embedding"]
