@@ -411,7 +411,8 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
                               "optimizer", "width", "jacobian_weight", "hessian_weight",
-                              "closest_after"}
+                              "closest_after", "lr_min"}
+    assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]

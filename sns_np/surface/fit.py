@@ -87,7 +87,7 @@ class FitReport:
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
     ['closest_after', 'detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr',
-     'normal_weight', 'optimizer', 'sampling', 'warmup']
+     'lr_min', 'normal_weight', 'optimizer', 'sampling', 'warmup']
     """
 
     steps: int = 0
