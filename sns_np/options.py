@@ -238,8 +238,8 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 
 #: the final learning rate of the cosine schedule that "auto" chooses, by how the target is
 #: parametrised. An analytic map's targets are exact, and the last steps at a rate ten times
-#: lower end nearer them (FLOWER, 540 s: held-out position 6.5e-5 -> 5.6e-5 and 5.1e-5 in two
-#: runs, mean H error at the closest point 4.25% -> 3.67% and 3.08%; the other paper shapes'
+#: lower end nearer them (FLOWER, 540 s: held-out position 6.5e-5 -> 5.1e-5 to 5.9e-5 in three
+#: runs, mean H error at the closest point 4.25% -> 3.08% to 3.67%; the other paper shapes'
 #: positions 21-31% lower; docs/fitting.md, "The paper's shapes"); a mesh's keep the rate
 #: their figures were measured with.
 LR_MIN = {"embedding": 1e-5, "exact": 1e-6}
