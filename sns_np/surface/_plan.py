@@ -238,11 +238,11 @@ def _plan(target, o, net, elapsed=0.0):
                           + (_closest_why(v) if k == "closest_after" else "")
                           + (_OPTIMIZER_WHY[v] if k == "optimizer" else "")}
     # "exact" for an analytic map; anything else is parametrised like a mesh
-    kind = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
+    param = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
     for name, (auto, why) in BY_PARAMETRISATION.items():
         if o[name] is None:
-            o[name] = auto[kind]
-            choices[name] = {"value": o[name], "why": why[kind]}
+            o[name] = auto[param]
+            choices[name] = {"value": o[name], "why": why[param]}
     for name, (auto, what) in DERIVATIVE_WEIGHTS.items():
         if o[name] is None:
             o[name] = auto["exact" if exact else "embedding"]
