@@ -18,9 +18,9 @@ Examples
 --------
 >>> o = FitOptions.from_kwargs(width=64, steps=None)   # None: the default
 >>> o.width, o.depth, o.steps
-(64, 8, None)
->>> FitOptions.help("depth")
-'residual blocks of a fresh network'
+(64, None, None)
+>>> FitOptions.help("dtype")
+'training precision; the result is float64'
 >>> HeatOptions().refit_steps, MCFOptions().lr
 (100, 0.0001)
 """
@@ -36,8 +36,9 @@ from dataclasses import dataclass
 from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
-           "given_arguments", "AUTO", "DETAIL_RANGE", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT",
-           "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
+           "given_arguments", "AUTO", "AUTO_EXACT", "DETAIL_RANGE", "NORMAL_WEIGHT",
+           "JACOBIAN_WEIGHT", "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP",
+           "CREASE_ANGLE",
            "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "COARSE_TURN",
            "check_creases",
            "CHECKPOINT_STEPS",
@@ -218,11 +219,19 @@ DETAIL_RANGE = (5e-3, 2e-2)
 AUTO = {
     "smooth": {"input_scale": 4.0, "lr": 1e-4, "warmup": 50, "time_budget": 240.0,
                "batch": 2048, "sampling": "area", "optimizer": "adam", "width": 256,
-               "closest_after": 1.0},
+               "depth": 8, "closest_after": 1.0},
     "detailed": {"input_scale": 40.0, "lr": 4e-3, "warmup": 100, "time_budget": 540.0,
                  "batch": 512, "sampling": "error", "optimizer": "soap", "width": 128,
-                 "closest_after": 0.2},
+                 "depth": 8, "closest_after": 0.2},
 }
+
+#: where the detailed end differs for an analytic map (``fit_shape``): a wider, shallower
+#: network of about the same cost per step (192^2 x 4 against 128^2 x 8 in the products). Its
+#: position had stopped improving at 128 x 8 (FLOWER, 1800 s), and at 192 x 4 FLOWER's
+#: held-out position is 3.9e-5 against 5.1e-5 - 5.9e-5, its mean H error at the closest point
+#: 2.56% against 3.08% - 3.67% (540 s; docs/fitting.md, "The network's width"). A mesh keeps
+#: 128 x 8: the armadillo at 192 x 4 ends at 2.78 deg against 2.36 - 2.44
+AUTO_EXACT = {"width": 192, "depth": 4}
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
 #: with importance weights (a mesh only; ``sns_np.surface._adaptive``)
@@ -334,8 +343,10 @@ def _auto(name, unit=""):
     """How "auto" chooses option ``name``, with the values at either end (for help texts)."""
     s, d = AUTO["smooth"][name], AUTO["detailed"][name]
     fmt = "" if isinstance(s, str) else "g"
+    exact = (f", {AUTO_EXACT[name]:{fmt}}{unit} for a detailed analytic map"
+             if name in AUTO_EXACT else "")
     return (f"chosen from the target's detail, {s:{fmt}}{unit} for a smooth target, "
-            f"{d:{fmt}}{unit} for a detailed one")
+            f"{d:{fmt}}{unit} for a detailed one{exact}")
 
 
 @dataclass(frozen=True)
@@ -367,7 +378,10 @@ class FitOptions(Options):
 
     width: int | None = option(None, f"network width of a fresh network (default: "
                                f"{_auto('width')})", Int(1), resume=True)
-    depth: int = option(8, "residual blocks of a fresh network", Int(0), resume=True)
+    depth: int | None = option(None, f"residual blocks of a fresh network (default: "
+                               f"{AUTO['detailed']['depth']}; {AUTO_EXACT['depth']} for a "
+                               f"detailed analytic map, interpolated in between)", Int(0),
+                               resume=True)
     steps: int | None = option(
         None, "step budget (default: as many as fit the time budget, with the learning rate "
         "decaying with the time elapsed)", Int(1), resume=True)

@@ -273,7 +273,7 @@ def test_normal_weight_follows_the_parametrisation():
     # a target of fit_sampler that does not say "exact" is parametrised like a mesh
     from sns_np.options import FitOptions
     from sns_np.surface._plan import _plan
-    o = FitOptions(steps=1, width=16, batch=8, lr=1e-3, warmup=0, input_scale=4.0,
+    o = FitOptions(steps=1, width=16, depth=1, batch=8, lr=1e-3, warmup=0, input_scale=4.0,
                    optimizer="adam").to_dict()
     unknown = type("Target", (), {"parametrisation": "something else"})()
     _plan(unknown, o, net=None)
@@ -396,22 +396,25 @@ def test_gauss_newton_readout_lowers_the_loss():
 
 
 def test_auto_choices_follow_the_detail_and_are_recorded():
+    from sns_np.options import AUTO_EXACT
     from sns_np.shapes import Bobble
     from sns_np.surface.fit import AUTO, _ShapeTarget, detail
     smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
     assert smooth < 5e-3 < 2e-2 < bumpy
     opts = dict(TINY, steps=3)
-    del opts["input_scale"], opts["lr"], opts["batch"], opts["width"]
+    del opts["input_scale"], opts["lr"], opts["batch"], opts["width"], opts["depth"]
     S, r = fit_shape(Bobble(), **opts)
-    assert r.options["width"] == AUTO["detailed"]["width"] == 128
-    assert S.net.width == 128
+    # a detailed analytic map: the wider, shallower network of AUTO_EXACT
+    assert r.options["width"] == AUTO_EXACT["width"] == 192
+    assert (S.net.width, S.net.depth) == (192, 4) == (r.options["width"], r.options["depth"])
+    assert "analytic map's network" in r.choices["depth"]["why"]
     assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
     assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
-                              "optimizer", "width", "jacobian_weight", "hessian_weight",
-                              "closest_after", "lr_min"}
+                              "optimizer", "width", "depth", "jacobian_weight",
+                              "hessian_weight", "closest_after", "lr_min"}
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
@@ -423,6 +426,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["batch"] == AUTO["smooth"]["batch"] == 2048
     assert r.options["optimizer"] == "adam"
     assert r.options["width"] == AUTO["smooth"]["width"] == S.net.width == 256
+    assert r.options["depth"] == AUTO["smooth"]["depth"] == S.net.depth == 8
 
 
 def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
@@ -434,12 +438,18 @@ def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
     monkeypatch.setattr(plan, "detail", lambda t: float(np.sqrt(np.prod(DETAIL_RANGE))))
     o = FitOptions().to_dict()
     choices = plan._plan(target, o, None)
-    # sqrt(256 * 128) = 181, rounded to a multiple of 16
-    assert o["width"] == choices["width"]["value"] == 176
+    # an analytic map: sqrt(256 * 192) = 222 rounded to a multiple of 16, sqrt(8 * 4) = 5.7
+    assert o["width"] == choices["width"]["value"] == 224
+    assert o["depth"] == choices["depth"]["value"] == 6
     assert "between (0.50)" in choices["width"]["why"]
+    # a mesh (any target not parametrised exactly): sqrt(256 * 128) = 181, depth 8 at both ends
+    monkeypatch.setattr(target, "parametrisation", "embedding", raising=False)
+    o = FitOptions().to_dict()
+    plan._plan(target, o, None)
+    assert (o["width"], o["depth"]) == (176, 8)
     o = FitOptions().to_dict()
     plan._plan(target, o, ResidualMLP(width=24, depth=1, seed=0))
-    assert o["width"] == 24
+    assert (o["width"], o["depth"]) == (24, 1)
     o = FitOptions(width=40).to_dict()          # given: never overridden
     assert "width" not in plan._plan(target, o, None) and o["width"] == 40
 

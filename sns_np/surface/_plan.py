@@ -12,6 +12,7 @@ from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
 from ..options import (
     AUTO,
+    AUTO_EXACT,
     CLOSEST_NORMAL_AREA,
     CLOSEST_NORMAL_MAX,
     COARSE_CLOSEST_NORMAL,
@@ -63,11 +64,14 @@ def _closest_why(v):
             f"linear parametrisation, docs/fitting.md)")
 
 
-def _auto_values(d):
-    """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1)."""
+def _auto_values(d, param="embedding"):
+    """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1);
+    ``param`` "exact" (an analytic map) takes its detailed end's network from AUTO_EXACT."""
     lo, hi = DETAIL_RANGE
     t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
     a, b = AUTO["smooth"], AUTO["detailed"]
+    if param == "exact":
+        b = {**b, **AUTO_EXACT}
     # numbers on a log scale; a choice among names (sampling) from the nearer end
     vals = {k: (a[k] if t < 0.5 else b[k]) if isinstance(a[k], str)
             else float(a[k] ** (1 - t) * b[k] ** t) for k in a}
@@ -212,13 +216,17 @@ def _plan(target, o, net, elapsed=0.0):
                 o[k] = AUTO["smooth"][k]
         if o["width"] is None:
             o["width"] = net.width
+        if o["depth"] is None:
+            o["depth"] = net.depth
+    # "exact" for an analytic map; anything else is parametrised like a mesh
+    param = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
     todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer",
-                        "width", "closest_after") if o[k] is None and net is None]
+                        "width", "depth", "closest_after") if o[k] is None and net is None]
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
         d = detail(target)
-        vals, t = _auto_values(d)
+        vals, t = _auto_values(d, param)
         kind = "smooth" if t == 0 else "detailed" if t == 1 else f"between ({t:.2f})"
         choices["detail"] = {"value": d, "why": f"{kind}: read-out error of scale-4 features; "
                              f"smooth <= {DETAIL_RANGE[0]:g}, detailed >= {DETAIL_RANGE[1]:g}"}
@@ -226,19 +234,19 @@ def _plan(target, o, net, elapsed=0.0):
             v = vals[k]
             if k == "time_budget":
                 v = max(v - elapsed, 10.0)
-            elif k in ("warmup", "batch"):
+            elif k in ("warmup", "batch", "depth"):
                 v = int(round(v))
             elif k == "width":          # a multiple of 16, as the products like it
                 v = int(16 * round(v / 16))
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
+                          + (": an analytic map's network" if k in AUTO_EXACT
+                             and param == "exact" and t > 0 else "")
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")
                           + (_closest_why(v) if k == "closest_after" else "")
                           + (_OPTIMIZER_WHY[v] if k == "optimizer" else "")}
-    # "exact" for an analytic map; anything else is parametrised like a mesh
-    param = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
     for name, (auto, why) in BY_PARAMETRISATION.items():
         if o[name] is None:
             o[name] = auto[param]
@@ -263,7 +271,9 @@ def _probe_step_time(o, repeats=2):
     g = np.random.default_rng(0)
     # an automatic width or batch is not known yet: the smallest it can be (lenient)
     width = o.width or min(end["width"] for end in AUTO.values())
-    net = ResidualMLP(width=width, depth=o.depth, seed=g, dtype=np.dtype(o.dtype))
+    depth = o.depth if o.depth is not None else min(
+        [end["depth"] for end in AUTO.values()] + [AUTO_EXACT["depth"]])
+    net = ResidualMLP(width=width, depth=depth, seed=g, dtype=np.dtype(o.dtype))
     batch = o.batch or min(end["batch"] for end in AUTO.values())
     p = uniform_sphere(batch, g)
     pc, R = p.astype(net.dtype), tangent_frame(p).astype(net.dtype)
