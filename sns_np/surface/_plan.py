@@ -269,7 +269,7 @@ def _probe_step_time(o, repeats=2):
     """Seconds per training step of the options' (FitOptions) network and batch, measured on
     this machine (a fresh network, random points: about a second)."""
     g = np.random.default_rng(0)
-    # an automatic width or batch is not known yet: the smallest it can be (lenient)
+    # an automatic width, depth or batch is not known yet: the cheapest it can be (lenient)
     width = o.width or min(end["width"] for end in AUTO.values())
     depth = o.depth if o.depth is not None else min(
         [end["depth"] for end in AUTO.values()] + [AUTO_EXACT["depth"]])
