@@ -214,10 +214,9 @@ def _plan(target, o, net, elapsed=0.0):
         for k in ("lr", "warmup", "batch", "sampling", "optimizer"):
             if o[k] is None:
                 o[k] = AUTO["smooth"][k]
-        if o["width"] is None:
-            o["width"] = net.width
-        if o["depth"] is None:
-            o["depth"] = net.depth
+        for k in ("width", "depth"):
+            if o[k] is None:
+                o[k] = getattr(net, k)
     # "exact" for an analytic map; anything else is parametrised like a mesh
     param = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
     todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer",
