@@ -230,11 +230,8 @@ AUTO = {
 #: position had stopped improving at 128 x 8 (FLOWER, 1800 s), and at 192 x 4 FLOWER's
 #: held-out position is 3.9e-5 against 5.1e-5 - 5.9e-5, its mean H error at the closest point
 #: 2.56% against 3.08% - 3.67% (540 s; docs/fitting.md, "The network's width"). A mesh keeps
-#: 128 x 8: the armadillo at 192 x 4 ends at 2.78 deg against 2.36 - 2.44. Its first layer is
-#: slower (scale 10, not 40): FLOWER's same-point H error falls steadily with the scale, from
-#: 3.4% at 60 and 2.4% at 40 to 1.6% at 10, one thread each (docs/fitting.md, "The first
-#: layer's scale for an analytic map")
-AUTO_EXACT = {"width": 192, "depth": 4, "input_scale": 10.0}
+#: 128 x 8: the armadillo at 192 x 4 ends at 2.78 deg against 2.36 - 2.44
+AUTO_EXACT = {"width": 192, "depth": 4}
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
 #: with importance weights (a mesh only; ``sns_np.surface._adaptive``)

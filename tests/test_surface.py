@@ -408,9 +408,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["width"] == AUTO_EXACT["width"] == 192
     assert (S.net.width, S.net.depth) == (192, 4) == (r.options["width"], r.options["depth"])
     assert "analytic map's network" in r.choices["depth"]["why"]
-    # ... and its slower first layer; a mesh's detailed end keeps AUTO["detailed"]'s 40
-    assert r.options["input_scale"] == AUTO_EXACT["input_scale"] == 10.0
-    assert "analytic map's first layer" in r.choices["input_scale"]["why"]
+    assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
@@ -419,7 +417,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
                               "hessian_weight", "closest_after", "lr_min"}
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
-    assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 10.0
+    assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     # a budget too short for the goals says so
     assert any("too short" in n for n in r.notes) and "too short" in r.summary()
@@ -432,7 +430,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
 
 
 def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
-    from sns_np.options import AUTO_EXACT, DETAIL_RANGE, FitOptions
+    from sns_np.options import DETAIL_RANGE, FitOptions
     from sns_np.surface import _plan as plan
     from sns_np.surface.fit import _ShapeTarget
     target = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
@@ -443,15 +441,12 @@ def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
     # an analytic map: sqrt(256 * 192) = 222 rounded to a multiple of 16, sqrt(8 * 4) = 5.7
     assert o["width"] == choices["width"]["value"] == 224
     assert o["depth"] == choices["depth"]["value"] == 6
-    assert o["input_scale"] == pytest.approx(np.sqrt(4.0 * 10.0))         # ends 4 and 10
     assert "between (0.50)" in choices["width"]["why"]
-    assert set(plan._EXACT_WHY) == set(AUTO_EXACT)      # every exact choice says why
     # a mesh (any target not parametrised exactly): sqrt(256 * 128) = 181, depth 8 at both ends
     monkeypatch.setattr(target, "parametrisation", "embedding", raising=False)
     o = FitOptions().to_dict()
     plan._plan(target, o, None)
     assert (o["width"], o["depth"]) == (176, 8)
-    assert o["input_scale"] == pytest.approx(np.sqrt(4.0 * 40.0))         # ends 4 and 40
     o = FitOptions().to_dict()
     plan._plan(target, o, ResidualMLP(width=24, depth=1, seed=0))
     assert (o["width"], o["depth"]) == (24, 1)

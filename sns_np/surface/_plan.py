@@ -64,15 +64,9 @@ def _closest_why(v):
             f"linear parametrisation, docs/fitting.md)")
 
 
-#: why an analytic map's detailed end differs from a mesh's (the options of AUTO_EXACT)
-_EXACT_WHY = {"width": ": an analytic map's network", "depth": ": an analytic map's network",
-              "input_scale": ": an analytic map's first layer"}
-
-
 def _auto_values(d, param="embedding"):
     """The interpolated choices for detail ``d``, and the position in DETAIL_RANGE (0 - 1);
-    ``param`` "exact" (an analytic map) takes its detailed end's network and first-layer scale
-    from AUTO_EXACT."""
+    ``param`` "exact" (an analytic map) takes its detailed end's network from AUTO_EXACT."""
     lo, hi = DETAIL_RANGE
     t = float(np.clip(np.log(d / lo) / np.log(hi / lo), 0.0, 1.0))
     a, b = AUTO["smooth"], AUTO["detailed"]
@@ -245,8 +239,8 @@ def _plan(target, o, net, elapsed=0.0):
                 v = int(16 * round(v / 16))
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
-                          + (_EXACT_WHY[k] if k in AUTO_EXACT and param == "exact"
-                             and t > 0 else "")
+                          + (": an analytic map's network" if k in AUTO_EXACT
+                             and param == "exact" and t > 0 else "")
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")
