@@ -7,7 +7,7 @@ Run::
     python benchmarks/fit_quality.py spot --time-budget 1800 # any fitting option
     python benchmarks/fit_quality.py dtype --steps 150       # float32 vs float64 training
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
-    python benchmarks/fit_quality.py detail                  # the detail measure of each case
+    python benchmarks/fit_quality.py detail                  # the detail measures of each case
     python benchmarks/fit_quality.py loop spot max           # a Loop surface on the same measures
     python benchmarks/fit_quality.py models A.npz flower=B.npz  # saved fits: roughness, drift
     python benchmarks/fit_quality.py path/to/mesh.obj        # any closed genus-0 mesh file
@@ -114,7 +114,7 @@ def fit_options(args):
     keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "lr_min",
             "input_scale", "normal_weight", "smooth", "creases", "sampling", "optimizer",
             "vertex_fraction", "jacobian_weight", "hessian_weight", "tangent_weight",
-            "closest_after", "anchor_weight", "closest_normal_weight")
+            "closest_after", "anchor_weight", "closest_normal_weight", "seed")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -482,15 +482,17 @@ def models_case(args):
 
 
 def detail_case(args):
-    """The detail measure that chooses the fitting defaults, for every case."""
-    from sns_np.surface.fit import _MeshTarget, _ShapeTarget, detail
+    """The detail measures that choose the fitting defaults, for every case: the read-out
+    errors of the positions and of the unit normals."""
+    from sns_np.surface.fit import _MeshTarget, _ShapeTarget, readout_errors
     for case in ALL:
         if case in SHAPES:
             target, n = _ShapeTarget(_shape(case)), "-"
         else:
             V, F, _ = case_mesh(case, args.shared)
             target, n = _MeshTarget(V, F, verbose=False), len(V)
-        print(f"{case}: {n} vertices, detail {detail(target):.2e}", flush=True)
+        d, dn = readout_errors(target)
+        print(f"{case}: {n} vertices, detail {d:.2e}, normals {dn:.2e}", flush=True)
 
 
 def main(argv=None):
@@ -500,6 +502,7 @@ def main(argv=None):
                          f"followed by mesh cases, or models followed by saved models "
                          f"(default: all)")
     for name, typ in (("width", int), ("depth", int), ("steps", int), ("batch", int),
+                      ("seed", int),
                       ("lr", float), ("lr-min", float), ("time-budget", float),
                       ("input-scale", float), ("normal-weight", float),
                       ("vertex-fraction", float), ("jacobian-weight", float),

@@ -440,7 +440,7 @@ def _choice_lines(choices):
         if isinstance(c, dict):
             v = c.get("value")
             v = f"{v:.3g}" if isinstance(v, float) else v
-            verb = "measured" if k == "detail" else "chosen"
+            verb = "measured" if k in ("detail", "normal_detail") else "chosen"
             out.append(f"  {verb} {_printable(k)} = {_printable(v)} "
                        f"({_printable(c.get('why'))})")
     return out

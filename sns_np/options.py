@@ -36,7 +36,8 @@ from dataclasses import dataclass
 from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
-           "given_arguments", "AUTO", "AUTO_EXACT", "DETAIL_RANGE", "NORMAL_WEIGHT",
+           "given_arguments", "AUTO", "AUTO_EXACT", "DETAIL_RANGE", "NORMAL_DETAIL_RANGE",
+           "NORMAL_WEIGHT",
            "JACOBIAN_WEIGHT", "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP",
            "CREASE_ANGLE",
            "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "COARSE_TURN",
@@ -214,6 +215,14 @@ def _is_int(value):
 #: Measured (docs/fitting.md): spheres and ellipsoids 6e-4 - 3.3e-3; spot, max, the armadillo
 #: and the paper's shapes 3e-2 - 1.2e-1
 DETAIL_RANGE = (5e-3, 2e-2)
+
+#: the same for the unit normals' read-out error (dimensionless); a target is as detailed as
+#: the larger of its two positions says. The position's error grows with the relief's height,
+#: the normals' with its slope, so a low relief of short wavelength (FLOWER's ridges at 3%
+#: of their height: positions 1.0e-2, between; normals 0.35, detailed) is not taken for a
+#: smooth shape. Measured (docs/fitting.md): spheres and ellipsoids 6e-4 - 6.9e-3; the
+#: shared detailed meshes and the paper's shapes 0.2 - 0.97
+NORMAL_DETAIL_RANGE = (2e-2, 4e-1)
 
 #: the options "auto" chooses at either end of DETAIL_RANGE
 AUTO = {

@@ -14,7 +14,7 @@ from sns_np.options import (
     LR_MIN,
     NORMAL_WEIGHT,
 )
-from sns_np.shapes import Ellipsoid
+from sns_np.shapes import Ellipsoid, Flower, RadialShape
 from sns_np.surface import (
     SphericalNeuralSurface,
     fit_mesh,
@@ -412,7 +412,8 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
-    assert set(r.choices) == {"detail", "input_scale", "lr", "warmup", "batch", "sampling",
+    assert set(r.choices) == {"detail", "normal_detail", "input_scale", "lr", "warmup",
+                              "batch", "sampling",
                               "optimizer", "width", "depth", "jacobian_weight",
                               "hessian_weight", "closest_after", "lr_min"}
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
@@ -429,13 +430,51 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["depth"] == AUTO["smooth"]["depth"] == S.net.depth == 8
 
 
+class _LowFlower(RadialShape):
+    """FLOWER with 3% of its relief: about as high as a smooth bump, as steep as a ridge."""
+
+    family = "flower"
+    pole_c = tuple(0.03 * c for c in Flower.pole_c)
+
+    def g(self, a):
+        return 0.03 * Flower.g(self, a)
+
+
+def test_a_low_relief_of_short_wavelength_is_detailed():
+    from sns_np.options import AUTO, DETAIL_RANGE, NORMAL_DETAIL_RANGE, FitOptions
+    from sns_np.surface import _plan as plan
+    from sns_np.surface.fit import _ShapeTarget, detail, readout_errors
+    smooth = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
+    low = _ShapeTarget(_LowFlower())
+    d, dn = readout_errors(low)
+    assert d == detail(low)                  # one read-out, two right-hand sides
+    assert DETAIL_RANGE[0] < d < DETAIL_RANGE[1]                  # its height: in between
+    assert dn > 0.5 * NORMAL_DETAIL_RANGE[1]                      # its slope: detailed
+    assert readout_errors(smooth)[1] < NORMAL_DETAIL_RANGE[0]     # an ellipsoid's: smooth
+    # the further of the two positions decides
+    t_pos = np.log(d / DETAIL_RANGE[0]) / np.log(DETAIL_RANGE[1] / DETAIL_RANGE[0])
+    t_nrm = min(np.log(dn / NORMAL_DETAIL_RANGE[0])
+                / np.log(NORMAL_DETAIL_RANGE[1] / NORMAL_DETAIL_RANGE[0]), 1.0)
+    assert t_pos < 0.7 < t_nrm
+    assert plan._auto_values(d, "exact", dn)[1] == pytest.approx(t_nrm)
+    assert plan._auto_values(d, "exact")[1] == pytest.approx(t_pos)
+    assert plan._auto_values(d, "exact", 1e-3)[1] == pytest.approx(t_pos)
+    o = FitOptions().to_dict()
+    choices = plan._plan(low, o, None)
+    assert choices["normal_detail"]["value"] == dn and choices["detail"]["value"] == d
+    lo, hi = AUTO["smooth"]["input_scale"], AUTO["detailed"]["input_scale"]
+    assert o["input_scale"] == pytest.approx(lo ** (1 - t_nrm) * hi ** t_nrm)
+    assert f"between ({t_nrm:.2f})" in choices["input_scale"]["why"]
+
+
 def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
     from sns_np.options import DETAIL_RANGE, FitOptions
     from sns_np.surface import _plan as plan
     from sns_np.surface.fit import _ShapeTarget
     target = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
     # a detail half way (on a log scale) between smooth and detailed
-    monkeypatch.setattr(plan, "detail", lambda t: float(np.sqrt(np.prod(DETAIL_RANGE))))
+    monkeypatch.setattr(plan, "readout_errors",
+                        lambda t: (float(np.sqrt(np.prod(DETAIL_RANGE))), 0.0))
     o = FitOptions().to_dict()
     choices = plan._plan(target, o, None)
     # an analytic map: sqrt(256 * 192) = 222 rounded to a multiple of 16, sqrt(8 * 4) = 5.7

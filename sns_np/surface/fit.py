@@ -61,6 +61,7 @@ from ._plan import (
     _probe_step_time,
     _schedule,
     detail,
+    readout_errors,
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
 from ._targets import _MeshTarget, _ShapeTarget
@@ -68,7 +69,7 @@ from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position
 from .model import SphericalNeuralSurface
 
 __all__ = ["FitReport", "FitOptions", "fit_mesh", "fit_shape", "fit_sampler", "detail",
-           "DEFAULTS"]
+           "readout_errors", "DEFAULTS"]
 
 #: the default fitting options as a dict (kept for older code: :class:`FitOptions` holds them)
 DEFAULTS = FitOptions().to_dict()
@@ -87,7 +88,7 @@ class FitReport:
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
     ['closest_after', 'detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr',
-     'lr_min', 'normal_weight', 'optimizer', 'sampling', 'warmup']
+     'lr_min', 'normal_detail', 'normal_weight', 'optimizer', 'sampling', 'warmup']
     """
 
     steps: int = 0
