@@ -37,13 +37,11 @@ from ._validation import check_choice, check_positive_float, check_positive_int
 
 __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add_arguments",
            "given_arguments", "AUTO", "AUTO_EXACT", "DETAIL_RANGE", "NORMAL_DETAIL_RANGE",
-           "NORMAL_WEIGHT",
-           "JACOBIAN_WEIGHT", "HESSIAN_WEIGHT", "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP",
-           "CREASE_ANGLE",
-           "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "COARSE_TURN",
-           "check_creases",
-           "CHECKPOINT_STEPS",
-           "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME", "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
+           "EXACT_INPUT_SCALE_MAX", "NORMAL_WEIGHT", "JACOBIAN_WEIGHT", "HESSIAN_WEIGHT",
+           "SAMPLINGS", "MESH_SMOOTHING", "CREASE_GAP", "CREASE_ANGLE",
+           "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "COARSE_TURN", "check_creases",
+           "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME",
+           "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
 
 
 class UnknownOptionError(TypeError, ValueError):
@@ -241,6 +239,16 @@ AUTO = {
 #: 2.56% against 3.08% - 3.67% (540 s; docs/fitting.md, "The network's width"). A mesh keeps
 #: 128 x 8: the armadillo at 192 x 4 ends at 2.78 deg against 2.36 - 2.44
 AUTO_EXACT = {"width": 192, "depth": 4}
+
+#: the fastest first layer "auto" gives an analytic map: its scale is interpolated as a mesh's
+#: (4 to 40 over DETAIL_RANGE) and held at this. Its fit supervises the first and second
+#: derivatives too, and slower features fit them better, down to a cliff near 7 where FLOWER's
+#: fit never leaves its starting plateau (540 s, closest-point H error at 40 / 16: FLOWER
+#: 2.56 - 2.65% / 2.13%, BOBBLE 0.79 / 0.55%, TREE 0.88 / 0.79%, SPIKE 0.55 / 0.48%;
+#: docs/fitting.md, "The first layer's scale for an analytic map"). A cap, not a new end, so
+#: a target half way keeps the scale its ridges need (FLOWER at 1% of its relief: 17 -> 16,
+#: not 9.6). A mesh keeps 40: it has no derivatives to supervise, and spot's detail wants 40
+EXACT_INPUT_SCALE_MAX = 16.0
 
 #: how a fit draws its training points: uniformly by area, or weighted by the recent error
 #: with importance weights (a mesh only; ``sns_np.surface._adaptive``)

@@ -396,7 +396,7 @@ def test_gauss_newton_readout_lowers_the_loss():
 
 
 def test_auto_choices_follow_the_detail_and_are_recorded():
-    from sns_np.options import AUTO_EXACT
+    from sns_np.options import AUTO_EXACT, EXACT_INPUT_SCALE_MAX
     from sns_np.shapes import Bobble
     from sns_np.surface.fit import AUTO, _ShapeTarget, detail
     smooth, bumpy = detail(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))), detail(_ShapeTarget(Bobble()))
@@ -408,7 +408,9 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert r.options["width"] == AUTO_EXACT["width"] == 192
     assert (S.net.width, S.net.depth) == (192, 4) == (r.options["width"], r.options["depth"])
     assert "analytic map's network" in r.choices["depth"]["why"]
-    assert r.options["input_scale"] == AUTO["detailed"]["input_scale"]
+    # its first layer no faster than the analytic map's cap, well below a mesh's 40
+    assert r.options["input_scale"] == EXACT_INPUT_SCALE_MAX < AUTO["detailed"]["input_scale"]
+    assert "at most 16 for an analytic map" in r.choices["input_scale"]["why"]
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
@@ -418,7 +420,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
                               "hessian_weight", "closest_after", "lr_min"}
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
-    assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 40.0
+    assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 16.0
     assert "SOAP" in S.metadata["fit"]["choices"]["optimizer"]["why"]
     # a budget too short for the goals says so
     assert any("too short" in n for n in r.notes) and "too short" in r.summary()
@@ -441,7 +443,8 @@ class _LowFlower(RadialShape):
 
 
 def test_a_low_relief_of_short_wavelength_is_detailed():
-    from sns_np.options import AUTO, DETAIL_RANGE, NORMAL_DETAIL_RANGE, FitOptions
+    from sns_np.options import (AUTO, DETAIL_RANGE, EXACT_INPUT_SCALE_MAX,
+                                NORMAL_DETAIL_RANGE, FitOptions)
     from sns_np.surface import _plan as plan
     from sns_np.surface.fit import _ShapeTarget, detail, readout_errors
     smooth = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
@@ -462,9 +465,32 @@ def test_a_low_relief_of_short_wavelength_is_detailed():
     o = FitOptions().to_dict()
     choices = plan._plan(low, o, None)
     assert choices["normal_detail"]["value"] == dn and choices["detail"]["value"] == d
+    # near the detailed end: an analytic map's first layer at its cap
     lo, hi = AUTO["smooth"]["input_scale"], AUTO["detailed"]["input_scale"]
-    assert o["input_scale"] == pytest.approx(lo ** (1 - t_nrm) * hi ** t_nrm)
+    assert lo ** (1 - t_nrm) * hi ** t_nrm > EXACT_INPUT_SCALE_MAX
+    assert o["input_scale"] == EXACT_INPUT_SCALE_MAX
     assert f"between ({t_nrm:.2f})" in choices["input_scale"]["why"]
+    lr = AUTO["smooth"]["lr"] ** (1 - t_nrm) * AUTO["detailed"]["lr"] ** t_nrm
+    assert o["lr"] == pytest.approx(lr)
+
+
+@pytest.mark.parametrize("t", [0.0, 0.3, 0.5, 0.63, 0.8, 0.95, 1.0])
+def test_an_analytic_maps_first_layer_is_capped_not_rescaled(t):
+    # the cap bounds an analytic map's scale; below it both parametrisations interpolate the
+    # same 4 - 40 on a log scale (an end at the cap would lower every scale in between)
+    from sns_np.options import AUTO, DETAIL_RANGE, EXACT_INPUT_SCALE_MAX
+    from sns_np.surface import _plan as plan
+    lo, hi = DETAIL_RANGE
+    d = lo * (hi / lo) ** t
+    mesh, t_mesh = plan._auto_values(d, "embedding")
+    exact, t_exact = plan._auto_values(d, "exact")
+    assert t_mesh == t_exact == pytest.approx(t)
+    a, b = AUTO["smooth"]["input_scale"], AUTO["detailed"]["input_scale"]
+    assert mesh["input_scale"] == pytest.approx(a ** (1 - t) * b ** t)
+    assert exact["input_scale"] == pytest.approx(min(mesh["input_scale"], EXACT_INPUT_SCALE_MAX))
+    assert a < EXACT_INPUT_SCALE_MAX < b
+    # only the scale differs by the cap
+    assert exact["lr"] == mesh["lr"] and exact["batch"] == mesh["batch"]
 
 
 def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):

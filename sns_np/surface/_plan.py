@@ -18,6 +18,7 @@ from ..options import (
     COARSE_CLOSEST_NORMAL,
     COARSE_VERTEX_FRACTION,
     DETAIL_RANGE,
+    EXACT_INPUT_SCALE_MAX,
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
     LR_MIN,
@@ -89,6 +90,8 @@ def _auto_values(d, param="embedding", dn=None):
             else float(a[k] ** (1 - t) * b[k] ** t) for k in a}
     if t in (0.0, 1.0):
         vals = dict(a if t == 0.0 else b)
+    if param == "exact":
+        vals["input_scale"] = min(vals["input_scale"], EXACT_INPUT_SCALE_MAX)
     return vals, t
 
 
@@ -280,6 +283,9 @@ def _plan(target, o, net, elapsed=0.0):
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (": an analytic map's network" if k in AUTO_EXACT
                              and param == "exact" and t > 0 else "")
+                          + (f"; at most {EXACT_INPUT_SCALE_MAX:g} for an analytic map"
+                             if k == "input_scale" and param == "exact"
+                             and v >= EXACT_INPUT_SCALE_MAX else "")
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")
