@@ -443,8 +443,13 @@ class _LowFlower(RadialShape):
 
 
 def test_a_low_relief_of_short_wavelength_is_detailed():
-    from sns_np.options import (AUTO, DETAIL_RANGE, EXACT_INPUT_SCALE_MAX,
-                                NORMAL_DETAIL_RANGE, FitOptions)
+    from sns_np.options import (
+        AUTO,
+        DETAIL_RANGE,
+        EXACT_INPUT_SCALE_MAX,
+        NORMAL_DETAIL_RANGE,
+        FitOptions,
+    )
     from sns_np.surface import _plan as plan
     from sns_np.surface.fit import _ShapeTarget, detail, readout_errors
     smooth = _ShapeTarget(Ellipsoid(1.0, 1.3, 0.7))
