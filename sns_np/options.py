@@ -243,8 +243,8 @@ AUTO_EXACT = {"width": 192, "depth": 4}
 #: the fastest first layer "auto" gives an analytic map: its scale is interpolated as a mesh's
 #: (4 to 40 over DETAIL_RANGE) and held at this. Its fit supervises the first and second
 #: derivatives too, and slower features fit them better, down to a cliff near 7 where FLOWER's
-#: fit never leaves its starting plateau (540 s, closest-point H error at 40 / 16: FLOWER
-#: 2.56 - 2.65% / 2.13%, BOBBLE 0.79 / 0.55%, TREE 0.88 / 0.79%, SPIKE 0.55 / 0.48%;
+#: fit never leaves its starting plateau (540 s alone, closest-point H error at 40 / 16:
+#: FLOWER 2.56 - 2.65% / 2.06%, BOBBLE 0.79 / 0.51%, TREE 0.88 / 0.60%, SPIKE 0.55 / 0.27%;
 #: docs/fitting.md, "The first layer's scale for an analytic map"). A cap, not a new end, so
 #: a target half way keeps the scale its ridges need (FLOWER at 1% of its relief: 17 -> 16,
 #: not 9.6). A mesh keeps 40: it has no derivatives to supervise, and spot's detail wants 40

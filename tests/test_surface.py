@@ -410,7 +410,8 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert "analytic map's network" in r.choices["depth"]["why"]
     # its first layer no faster than the analytic map's cap, well below a mesh's 40
     assert r.options["input_scale"] == EXACT_INPUT_SCALE_MAX < AUTO["detailed"]["input_scale"]
-    assert "at most 16 for an analytic map" in r.choices["input_scale"]["why"]
+    assert (f"at most {EXACT_INPUT_SCALE_MAX:g} for an analytic map"
+            in r.choices["input_scale"]["why"])
     assert r.options["lr"] == AUTO["detailed"]["lr"]
     assert r.options["batch"] == AUTO["detailed"]["batch"] == 512
     assert r.options["optimizer"] == AUTO["detailed"]["optimizer"] == "soap"
