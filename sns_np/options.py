@@ -445,7 +445,8 @@ class FitOptions(Options):
                        resume=True)
     input_scale: float | None = option(
         None, f"scale of the first layer's initial weights (default: "
-        f"{_auto('input_scale')}, interpolated in between)", Real(), resume=True)
+        f"{_auto('input_scale')}, interpolated in between; at most "
+        f"{EXACT_INPUT_SCALE_MAX:g} for an analytic map)", Real(), resume=True)
     tangent_weight: float = option(1.0, "weight of the tangential part of the position error",
                                    Real(), resume=True)
     closest_after: float | None = option(

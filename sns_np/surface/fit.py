@@ -398,7 +398,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         chosen from the target's :func:`detail`, small for a smooth target (a larger scale
         makes the curvature of a coarse mesh of a smooth shape follow its facets) and ten
         times larger for a detailed one (features that vary fast enough for ears, horns and
-        faces), interpolated in between (docs/fitting.md).
+        faces), interpolated in between, and at most 16 for an analytic map, whose
+        derivatives are supervised too (``sns_np.options.EXACT_INPUT_SCALE_MAX``;
+        docs/fitting.md).
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step). Default when ``steps`` is not given either:
         chosen from the target's detail, in all, less the ``elapsed_before`` seconds already
