@@ -499,6 +499,35 @@ def test_an_analytic_maps_first_layer_is_capped_not_rescaled(t):
     assert exact["lr"] == mesh["lr"] and exact["batch"] == mesh["batch"]
 
 
+def test_a_detailed_analytic_map_gets_the_longer_budget():
+    # a mesh ends at 540 s (embedding included); a detailed analytic map at 1800 s, the time
+    # FLOWER's curvature needs; both start from the smooth end's 240 s
+    from sns_np.options import AUTO, AUTO_EXACT, DETAIL_RANGE, FitOptions
+    from sns_np.shapes import Bobble
+    from sns_np.surface import _plan as plan
+    from sns_np.surface.fit import _ShapeTarget
+    assert AUTO["smooth"]["time_budget"] < AUTO["detailed"]["time_budget"] \
+        < AUTO_EXACT["time_budget"] == 1800.0
+    o = FitOptions().to_dict()
+    choices = plan._plan(_ShapeTarget(Bobble()), o, None)
+    assert o["time_budget"] == choices["time_budget"]["value"] == AUTO_EXACT["time_budget"]
+    assert "analytic map's budget" in choices["time_budget"]["why"]
+    o = FitOptions().to_dict()
+    plan._plan(_ShapeTarget(Ellipsoid(1.0, 1.3, 0.7)), o, None)
+    assert o["time_budget"] == AUTO["smooth"]["time_budget"]
+    # half way: interpolated on a log scale towards each parametrisation's own end
+    d = float(np.sqrt(np.prod(DETAIL_RANGE)))
+    a = AUTO["smooth"]["time_budget"]
+    for param, end in (("exact", AUTO_EXACT["time_budget"]),
+                       ("embedding", AUTO["detailed"]["time_budget"])):
+        assert plan._auto_values(d, param)[0]["time_budget"] == pytest.approx((a * end) ** 0.5)
+    # a budget or a step count given: no budget is chosen
+    for given in ({"time_budget": 30.0}, {"steps": 50}):
+        o = FitOptions(**given).to_dict()
+        choices = plan._plan(_ShapeTarget(Bobble()), o, None)
+        assert "time_budget" not in choices and o["time_budget"] == given.get("time_budget")
+
+
 def test_auto_width_is_interpolated_and_a_warm_start_keeps_its_own(monkeypatch):
     from sns_np.options import DETAIL_RANGE, FitOptions
     from sns_np.surface import _plan as plan

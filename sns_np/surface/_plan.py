@@ -53,6 +53,10 @@ _OPTIMIZER_WHY = {
     "soap": ": SOAP, Adam in the eigenbasis of Shampoo's factors for the hidden matrices "
             "(detail is learnt in fewer steps, docs/fitting.md)"}
 
+#: what AUTO_EXACT's choices are, for the reasons recorded
+_EXACT_WHAT = {"width": "network", "depth": "network",
+               "time_budget": "budget (its curvature keeps improving long after a mesh's)"}
+
 _SAMPLING_WHY = {
     "area": ": uniform by area (the error is spread evenly)",
     "error": ": more samples where the recent error is, weighted back to the same loss"}
@@ -281,7 +285,7 @@ def _plan(target, o, net, elapsed=0.0):
                 v = int(16 * round(v / 16))
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
-                          + (": an analytic map's network" if k in AUTO_EXACT
+                          + (f": an analytic map's {_EXACT_WHAT[k]}" if k in AUTO_EXACT
                              and param == "exact" and t > 0 else "")
                           + (f"; at most {EXACT_INPUT_SCALE_MAX:g} for an analytic map"
                              if k == "input_scale" and param == "exact"

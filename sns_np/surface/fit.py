@@ -344,7 +344,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         from the target's :func:`detail`, the reference's 256 for a smooth target and 128
         for a detailed one: a quarter of the products per step, so about four times the
         steps in the same time, and detail is limited by the steps, not by the width
-        (docs/fitting.md, "The network's width"). A warm start ``net`` keeps its own.
+        (docs/fitting.md, "The network's width"); a detailed analytic map gets 192 wide and
+        4 deep (``sns_np.options.AUTO_EXACT``). A warm start ``net`` keeps its own.
     steps : int, optional
         Step budget. Default: as many steps as fit in ``time_budget``, with the cosine decay
         running on the clock (over the fraction of the budget elapsed).
@@ -403,9 +404,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         docs/fitting.md).
     time_budget : float, seconds, optional
         Stop when exceeded (checked every step). Default when ``steps`` is not given either:
-        chosen from the target's detail, in all, less the ``elapsed_before`` seconds already
-        spent (the embedding). A ``steps`` that this budget cannot reach is refused before
-        the fit starts (by :func:`fit_mesh`, :func:`fit_shape`).
+        chosen from the target's detail (240 s for a smooth target, 540 s for a detailed
+        mesh, 1800 s for a detailed analytic map, whose curvature keeps improving), in all,
+        less the ``elapsed_before`` seconds already spent (the embedding). A ``steps`` that
+        this budget cannot reach is refused before the fit starts (by :func:`fit_mesh`,
+        :func:`fit_shape`).
     sampling : {"area", "error"}
         How training points are drawn: uniformly (by area on a mesh, on the sphere for an
         analytic map), or with probability that follows each cell's recent error (a patch
