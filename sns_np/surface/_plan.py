@@ -55,7 +55,8 @@ _OPTIMIZER_WHY = {
 
 #: what AUTO_EXACT's choices are, for the reasons recorded
 _EXACT_WHAT = {"width": "network", "depth": "network",
-               "time_budget": "budget (its curvature keeps improving long after a mesh's)"}
+               "time_budget": "budget (its curvature keeps improving with time, "
+                              "docs/fitting.md)"}
 
 _SAMPLING_WHY = {
     "area": ": uniform by area (the error is spread evenly)",
