@@ -405,7 +405,13 @@ def loop_case(args):
     """What a Loop subdivision surface of each mesh case reaches on the same measures; for
     the meshes of the paper's shapes, how far its normals and the mesh's are from the exact
     ones."""
-    names = [c for c in args.cases[1:] if c in MESHES or c in ANALYTIC_MESHES] or list(MESHES)
+    names = args.cases[1:] or list(MESHES)
+    bad = [c for c in names if c not in MESHES and c not in ANALYTIC_MESHES
+           and not _is_mesh_file(c)]
+    if bad:
+        raise SystemExit(f"fit_quality.py loop: unknown mesh case(s) {bad}; expected some of "
+                         f"{', '.join(list(MESHES) + list(ANALYTIC_MESHES))}, or the path of "
+                         f"a mesh file")
     for case in names:
         V, F, shape = case_mesh(case, args.shared)
         if case in ANALYTIC_MESHES:
