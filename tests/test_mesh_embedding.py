@@ -218,6 +218,34 @@ def test_unrepairable_conformal_maps_fall_back_to_tutte():
         assert rep.stretch_p99 < 0.5 * rep.candidates["tutte"] or len(F) == 20
 
 
+def test_the_density_flow_runs_in_partial_passes_only_where_the_full_flow_does_not_help():
+    from sns_np.mesh.embedding import STAGED_GAIN
+    # six legs of moderate width: the full flow ends above the stretch minimisation it
+    # started from, and partial passes go below it
+    V, F = legs(3, length=6.0, width=0.02)
+    Vs, rep = spherical_embedding(V, F)
+    assert_bijective(Vs, F)
+    assert rep.candidates["density"] >= rep.candidates["stretch"]
+    assert rep.method == "staged" and rep.density_steps > 0
+    assert rep.candidates["staged"] < STAGED_GAIN * rep.candidates["stretch"]
+    assert rep.stretch_p99 == min(rep.candidates.values())
+    assert "staged embedding" in str(rep)
+    # thinner legs: the full flow helps, and no partial pass is run
+    rep = spherical_embedding(*legs())[1]
+    assert rep.method == "density" and "staged" not in rep.candidates
+    # an explicit balance never runs them
+    rep = spherical_embedding(V, F, balance="density")[1]
+    assert rep.method == "density" and "staged" not in rep.candidates
+
+
+def test_partial_passes_stop_at_the_first_that_does_not_gain():
+    from sns_np.mesh.embedding import _staged_density
+    from sns_np.mesh.operators import face_areas
+    V, F = icosphere(2)                  # its own map is area-preserving up to the grid
+    X, kept, steps = _staged_density(V, F, V, face_areas(V, F), 3, FoldRepair(V, F))
+    assert kept == 0 and steps == 0 and X is V
+
+
 def test_equalise_areas_reduces_distortion_and_keeps_folds_away():
     V, F = ellipsoid(3, (1.0, 1.0, 4.0))
     Vs, _ = spherical_embedding(V, F, balance="none")

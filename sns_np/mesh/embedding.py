@@ -28,7 +28,10 @@ Pipeline (:func:`spherical_embedding`):
    strict one where it is clearly better (``PATIENT_GAIN``): the strict run stalls on long
    thin limbs (a horse's legs), the patient one overshoots on others (the armadillo). By
    default the candidate (conformal, stretch, stretch + density) with the
-   smallest 99th-percentile stretch of the sphere-to-surface map is returned.
+   smallest 99th-percentile stretch of the sphere-to-surface map is returned; where the
+   density flow ends worse than the stretch minimisation it started from (a part squeezed into
+   less than one cell of its grid), the flow is also run in partial passes
+   (``STAGED_STRENGTH``), a fourth candidate.
 
 References
 ----------
@@ -79,7 +82,9 @@ class EmbeddingReport:
     Attributes
     ----------
     method : str
-        The returned candidate: ``"conformal"``, ``"stretch"`` or ``"density"`` (or
+        The returned candidate: ``"conformal"``, ``"stretch"``, ``"density"`` or
+        ``"staged"`` (the density flow in partial passes, computed by ``balance="auto"`` only
+        where the full flow ends worse than the stretch minimisation) (or
         ``"tutte"`` when the conformal map could not be repaired and the Tutte fallback of
         :func:`~sns_np.mesh.foldrepair.tutte_sphere` was balanced instead).
     flow_steps : int
@@ -93,7 +98,8 @@ class EmbeddingReport:
         Rounds of Tutte region repair of the conformal map and the vertices the repair moved.
     centring_iterations : int
     stretch_iterations, density_steps : int
-        Accepted stretch-minimisation steps and density-flow steps (0 when not run).
+        Accepted stretch-minimisation steps and density-flow steps of the returned candidate
+        (0 when not run; for ``"staged"`` the steps of the passes kept).
     conformal_log_area_ratio_std, conformal_log_area_ratio_min : float
         Area distortion of the conformal map (of the Tutte fallback, when used).
     log_area_ratio_mean, log_area_ratio_std, log_area_ratio_min, log_area_ratio_max : float
@@ -115,7 +121,8 @@ class EmbeddingReport:
     >>> from sns_np.shapes import Ellipsoid
     >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
     >>> Vs, report = spherical_embedding(V, F)
-    >>> report.folds_after_repair, report.method in ("conformal", "stretch", "density", "tutte")
+    >>> report.folds_after_repair, report.method in ("conformal", "stretch", "density", "staged",
+...                                             "tutte")
     (0, True)
     """
 
@@ -285,6 +292,34 @@ BALANCE = ("auto", "none", "stretch", "density")
 STRETCH_TOLERANCES = (1.1, 1.5)
 PATIENT_GAIN = 0.8
 
+#: the density flow in partial passes, run only where the full flow ends with a larger
+#: stretch than the stretch minimisation it started from: with a part squeezed into less
+#: than one cell of the flow's grid, the full flow can collapse triangles (a screwdriver's
+#: blade, 3,395 vertices: stretch p99 55.5 before the flow, 6.3e6 after it). Each pass
+#: removes ``STAGED_STRENGTH`` of the log area distortion left, so the squeezed part grows
+#: over the grid's cells pass by pass; a pass is kept while it lowers the
+#: stretch p99 to below ``STAGED_GAIN`` times the best so far, at most ``STAGED_PASSES``
+#: (the screwdriver: 55.5, then 19.1 and 11.0; a third pass gains 2%, a fourth collapses
+#: triangles again; docs/mesh.md)
+STAGED_STRENGTH = 0.4
+STAGED_GAIN = 0.95
+STAGED_PASSES = 6
+
+
+def _staged_density(V, F, P, area, grid_level, repair):
+    """The density flow in partial passes from ``P`` (``STAGED_STRENGTH`` each), kept while
+    each pass lowers the stretch p99 below ``STAGED_GAIN`` times the best so far.
+    Returns (the last kept map, the passes kept, their flow steps)."""
+    best, X, kept, steps = _stretch_p99(V, F, P, area)[0], P, 0, 0
+    for _ in range(STAGED_PASSES):
+        Y, info = equalise_areas(V, F, X, strength=STAGED_STRENGTH, grid_level=grid_level,
+                                 repair=repair)
+        score = _stretch_p99(V, F, Y, area)[0]
+        if not score < STAGED_GAIN * best:
+            break
+        best, X, kept, steps = score, Y, kept + 1, steps + info["steps"]
+    return X, kept, steps
+
 
 def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
                         max_steps: int = 300, round_tol: float = 5e-3,
@@ -307,7 +342,9 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
         density-equalising flow (:func:`~sns_np.mesh.equalise.equalise_areas`). ``"auto"``:
         compute all three and return the one with the smallest 99th-percentile stretch
         (largest singular value of the sphere-to-surface map, area-weighted), the quantity that
-        limits how well a network on the sphere can fit the surface.
+        limits how well a network on the sphere can fit the surface; where the density flow
+        ends worse than the stretch minimisation, its partial passes are a fourth candidate
+        (``"staged"``, module docstring).
     tau : float
         Time step of the flow, relative to the mesh normalised to unit area.
     max_steps : int
@@ -412,9 +449,18 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
             Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
             candidates["density"], n_density = Pd, info["steps"]
             say(f"density equalisation: {n_density} steps")
+            if (balance == "auto" and _stretch_p99(V, F, Pd, area)[0]
+                    >= _stretch_p99(V, F, Ps, area)[0]):
+                Pg, passes, n_staged = _staged_density(V, F, Ps, area, grid_level, repair)
+                if passes:
+                    candidates["staged"] = Pg
+                    say(f"the full flow did not help: {passes} partial pass(es) of "
+                        f"strength {STAGED_STRENGTH}, {n_staged} steps")
     scores = {k: _stretch_p99(V, F, X, area) for k, X in candidates.items()}
     if balance == "auto":
         method = min(scores, key=lambda k: scores[k][0])
+        if method == "staged":
+            n_density = n_staged
     else:
         method = {"none": base}.get(balance, balance)
     P = candidates[method]
