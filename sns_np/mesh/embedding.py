@@ -122,7 +122,7 @@ class EmbeddingReport:
     >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
     >>> Vs, report = spherical_embedding(V, F)
     >>> report.folds_after_repair, report.method in ("conformal", "stretch", "density", "staged",
-...                                             "tutte")
+    ...                                             "tutte")
     (0, True)
     """
 
