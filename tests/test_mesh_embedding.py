@@ -239,10 +239,12 @@ def test_the_density_flow_runs_in_partial_passes_only_where_the_full_flow_does_n
 
 
 def test_partial_passes_stop_at_the_first_that_does_not_gain():
-    from sns_np.mesh.embedding import _staged_density
+    from sns_np.mesh.embedding import _staged_density, _stretch_p99
     from sns_np.mesh.operators import face_areas
     V, F = icosphere(2)                  # its own map is area-preserving up to the grid
-    X, kept, steps = _staged_density(V, F, V, face_areas(V, F), 3, FoldRepair(V, F))
+    area = face_areas(V, F)
+    p99 = _stretch_p99(V, F, V, area)[0]
+    X, kept, steps = _staged_density(V, F, V, p99, area, 3, FoldRepair(V, F))
     assert kept == 0 and steps == 0 and X is V
 
 

@@ -306,11 +306,12 @@ STAGED_GAIN = 0.95
 STAGED_PASSES = 6
 
 
-def _staged_density(V, F, P, area, grid_level, repair):
-    """The density flow in partial passes from ``P`` (``STAGED_STRENGTH`` each), kept while
-    each pass lowers the stretch p99 below ``STAGED_GAIN`` times the best so far.
+def _staged_density(V, F, P, p99, area, grid_level, repair):
+    """The density flow in partial passes from ``P`` (stretch p99 ``p99``;
+    ``STAGED_STRENGTH`` each), kept while each pass lowers the stretch p99 below
+    ``STAGED_GAIN`` times the best so far.
     Returns (the last kept map, the passes kept, their flow steps)."""
-    best, X, kept, steps = _stretch_p99(V, F, P, area)[0], P, 0, 0
+    best, X, kept, steps = p99, P, 0, 0
     for _ in range(STAGED_PASSES):
         Y, info = equalise_areas(V, F, X, strength=STAGED_STRENGTH, grid_level=grid_level,
                                  repair=repair)
@@ -443,15 +444,15 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
         for run in runs[1:]:
             if run[0] < PATIENT_GAIN * best[0]:
                 best = run
-        _, Ps, n_stretch = best
+        p99_stretch, Ps, n_stretch = best
         candidates["stretch"] = Ps
         if balance in ("auto", "density"):
             Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
             candidates["density"], n_density = Pd, info["steps"]
             say(f"density equalisation: {n_density} steps")
-            if (balance == "auto" and _stretch_p99(V, F, Pd, area)[0]
-                    >= _stretch_p99(V, F, Ps, area)[0]):
-                Pg, passes, n_staged = _staged_density(V, F, Ps, area, grid_level, repair)
+            if balance == "auto" and _stretch_p99(V, F, Pd, area)[0] >= p99_stretch:
+                Pg, passes, n_staged = _staged_density(V, F, Ps, p99_stretch, area,
+                                                       grid_level, repair)
                 if passes:
                     candidates["staged"] = Pg
                     say(f"the full flow did not help: {passes} partial pass(es) of "
