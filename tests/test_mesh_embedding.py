@@ -16,7 +16,7 @@ from sns_np.mesh import (
     spherical_embedding,
     spherical_triangle_areas,
 )
-from sns_np.mesh.foldrepair import tutte_sphere
+from sns_np.mesh.foldrepair import split_into_discs, tutte_halves, tutte_sphere
 
 from .test_mesh_helpers import ellipsoid, torus
 
@@ -216,6 +216,88 @@ def test_unrepairable_conformal_maps_fall_back_to_tutte():
         assert_bijective(Vs, F)
         assert "tutte" in rep.candidates and "conformal" not in rep.candidates
         assert rep.stretch_p99 < 0.5 * rep.candidates["tutte"] or len(F) == 20
+
+
+def blade(level=3):
+    """A long, flat, thin ellipsoid (a blade): 1 long, 0.04 wide, 0.005 thick."""
+    V, F = icosphere(level)
+    return V * [0.005, 0.04, 1.0], F
+
+
+def _euler(F):
+    from sns_np.mesh._arrays import unique_edges
+    return len(np.unique(F)) - len(unique_edges(F, F.max() + 1)[0]) + len(F)
+
+
+@pytest.mark.parametrize("shape", ["blade", "legs", "ellipsoid"])
+def test_split_into_discs_cuts_along_the_thinnest_direction(shape):
+    V, F = {"blade": blade, "legs": legs, "ellipsoid": lambda: ellipsoid(3, (1, 3, 0.3))}[shape]()
+    front, cycle = split_into_discs(V, F)
+    assert 0 < front.sum() < len(F)
+    # two discs: Euler characteristic 1 each, and their common boundary is the cycle
+    assert _euler(F[front]) == 1 and _euler(F[~front]) == 1
+    assert len(np.unique(cycle)) == len(cycle)
+    shared = np.intersect1d(np.unique(F[front]), np.unique(F[~front]))
+    assert np.array_equal(np.sort(cycle), shared)
+    # consecutive cycle vertices are edges of the front, in its orientation
+    directed = {(int(a), int(b)) for f in F[front] for a, b in zip(f, np.roll(f, -1))}
+    assert all((int(a), int(b)) in directed for a, b in zip(cycle, np.roll(cycle, -1)))
+    if shape != "legs":
+        # the cut runs around the outline, where the thin direction's coordinate is small
+        thin = np.argmin(np.ptp(V, axis=0))
+        assert np.abs(V[cycle, thin]).max() < 0.5 * np.abs(V[:, thin]).max()
+
+
+def test_tutte_halves_does_not_squeeze_a_blade():
+    V, F = blade()
+    ring = tutte_sphere(V, F)
+    X = tutte_halves(V, F)
+    FoldRepair(V, F)(X)
+    assert_bijective(X, F)
+    # the ring's Tutte map telescopes the blade towards a point (its far end at e^-12 of its
+    # share of the sphere, the spread of log area ratios 2.6); the halves' at most e^-6 (1.1)
+    d_ring, d_halves = area_distortion(V, F, ring), area_distortion(V, F, X)
+    assert d_ring.min() < -10 and d_halves.min() > -7
+    assert d_halves.std() < 0.5 * d_ring.std()
+
+
+def test_a_thin_blade_is_balanced_from_two_halves(monkeypatch):
+    import sns_np.mesh.embedding as embedding
+    from sns_np.mesh.embedding import HALVES_GAIN, HALVES_GATE
+    V, F = blade()
+    Vs, rep = spherical_embedding(V, F)
+    assert_bijective(Vs, F)
+    standard = min(v for k, v in rep.candidates.items() if not k.startswith("halves"))
+    assert standard > HALVES_GATE
+    assert rep.method.startswith("halves+") and rep.stretch_p99 < HALVES_GAIN * standard
+    assert rep.stretch_p99 == min(rep.candidates.values())
+    # without a clear gain the others are kept, although the halves' maps are computed
+    monkeypatch.setattr(embedding, "HALVES_GAIN", 0.1)
+    rep = spherical_embedding(V, F)[1]
+    assert "halves+stretch" in rep.candidates and not rep.method.startswith("halves")
+    assert rep.stretch_p99 == standard
+    monkeypatch.undo()
+    # an explicit balance, and a mesh below the gate, never take the halves' route
+    rep = spherical_embedding(V, F, balance="density")[1]
+    assert not any(k.startswith("halves") for k in rep.candidates)
+    rep = spherical_embedding(*ellipsoid(3, (1.0, 1.3, 0.7)))[1]
+    assert rep.stretch_p99 < HALVES_GATE
+    assert not any(k.startswith("halves") for k in rep.candidates)
+
+
+def test_where_the_tutte_fallback_folds_too_the_halves_are_the_start(monkeypatch):
+    import sns_np.mesh.embedding as embedding
+    V, F = blade()
+    # the flow's projection of this blade folds beyond repair (the Tutte fallback is used);
+    # a Tutte map that folds as well (as the ring's does on a sword of 22,293 vertices,
+    # telescoped below float64's resolution) must hand over to the halves
+    assert "tutte" in spherical_embedding(V, F, balance="none")[1].candidates
+    monkeypatch.setattr(embedding, "tutte_sphere", lambda V, F, W: -V / np.linalg.norm(
+        V, axis=1, keepdims=True))
+    Vs, rep = spherical_embedding(V, F)
+    assert_bijective(Vs, F)
+    assert "halves" in rep.candidates and "tutte" not in rep.candidates
+    assert rep.method.startswith("halves") or rep.method in ("stretch", "density", "staged")
 
 
 def test_the_density_flow_runs_in_partial_passes_only_where_the_full_flow_does_not_help():

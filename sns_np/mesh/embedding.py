@@ -17,6 +17,10 @@ Pipeline (:func:`spherical_embedding`):
 4. **Fold repair** (:class:`~sns_np.mesh.foldrepair.FoldRepair`): vertices of folded triangles
    are moved into the kernel of their 1-ring (a small linear programme in the gnomonic chart),
    and regions that still fold are re-embedded by Tutte's method with mean-value weights.
+   Where folds remain, the embedding starts over from Tutte's method on the whole sphere
+   (:func:`~sns_np.mesh.foldrepair.tutte_sphere`) and, where a long thin part (a blade)
+   makes that collapse too, from Tutte maps of two halves cut along the part
+   (:func:`~sns_np.mesh.foldrepair.tutte_halves`).
 5. **Area balancing** (``balance``): a conformal map squeezes protrusions exponentially (the
    armadillo's fingers get ``e^-27`` of their fair share of the sphere). Stretch-energy
    minimisation (:func:`~sns_np.mesh.stretch.minimise_stretch`, Yueh et al. 2019) moves the
@@ -31,7 +35,10 @@ Pipeline (:func:`spherical_embedding`):
    smallest 99th-percentile stretch of the sphere-to-surface map is returned; where the
    density flow ends worse than the stretch minimisation it started from (a part squeezed into
    less than one cell of its grid), the flow is also run in partial passes
-   (``STAGED_STRENGTH``), a fourth candidate.
+   (``STAGED_STRENGTH``), a fourth candidate. Where no candidate reaches a stretch p99 of
+   ``HALVES_GATE``, the same balancing also starts from
+   :func:`~sns_np.mesh.foldrepair.tutte_halves`, which cuts long thin parts along their
+   length instead of squeezing them (candidates ``"halves"``, ``"halves+stretch"``, ...).
 
 References
 ----------
@@ -62,7 +69,7 @@ from ._arrays import as_mesh
 from .check import check
 from .equalise import equalise_areas
 from .errors import EmbeddingError
-from .foldrepair import FoldRepair, tutte_sphere
+from .foldrepair import FoldRepair, tutte_halves, tutte_sphere
 from .operators import cotan_laplacian, face_areas, mass_matrix
 from .spherical import (
     area_distortion,
@@ -86,7 +93,11 @@ class EmbeddingReport:
         ``"staged"`` (the density flow in partial passes, computed by ``balance="auto"`` only
         where the full flow ends worse than the stretch minimisation) (or
         ``"tutte"`` when the conformal map could not be repaired and the Tutte fallback of
-        :func:`~sns_np.mesh.foldrepair.tutte_sphere` was balanced instead).
+        :func:`~sns_np.mesh.foldrepair.tutte_sphere` was balanced instead, and ``"halves"``
+        when that folded too and :func:`~sns_np.mesh.foldrepair.tutte_halves` was), or one
+        of the same balanced from ``tutte_halves`` (``"halves"``, ``"halves+stretch"``,
+        ``"halves+density"``, ``"halves+staged"``) where ``balance="auto"`` found no
+        candidate below a stretch p99 of ``HALVES_GATE``.
     flow_steps : int
         Conformalized mean curvature flow steps taken.
     roundness : float
@@ -122,7 +133,7 @@ class EmbeddingReport:
     >>> V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(2)
     >>> Vs, report = spherical_embedding(V, F)
     >>> report.folds_after_repair, report.method in ("conformal", "stretch", "density", "staged",
-    ...                                             "tutte")
+    ...                                             "tutte", "halves")
     (0, True)
     """
 
@@ -305,6 +316,17 @@ STAGED_STRENGTH = 0.4
 STAGED_GAIN = 0.95
 STAGED_PASSES = 6
 
+#: where no candidate of the conformal (or Tutte) start reaches a stretch p99 of
+#: ``HALVES_GATE``, "auto" also balances :func:`~sns_np.mesh.foldrepair.tutte_halves`, a start
+#: in which long thin parts are cut along their length instead of squeezed (the
+#: blade of a sword, 22,293 vertices: no fold-free map otherwise; docs/mesh.md)
+HALVES_GATE = 8.0
+#: ... and takes one of them only if its stretch p99 is below ``HALVES_GAIN`` times the best
+#: of the others: at 0.66 and 0.68 of it (a screwdriver, a penguin) the default fits were
+#: worse and level, as a Tutte start leaves the bulk of the surface more stretched (the
+#: screwdriver's median stretch 1.96 against 1.31)
+HALVES_GAIN = 0.5
+
 
 def _staged_density(V, F, P, p99, area, grid_level, repair):
     """The density flow in partial passes from ``P`` (stretch p99 ``p99``;
@@ -320,6 +342,57 @@ def _staged_density(V, F, P, p99, area, grid_level, repair):
             break
         best, X, kept, steps = score, Y, kept + 1, steps + info["steps"]
     return X, kept, steps
+
+
+def _halves(V, F, repair, max_repair_rounds):
+    """:func:`tutte_halves` with its folds repaired, or None if no fold-free one is found."""
+    try:
+        P = tutte_halves(V, F, repair.W)
+    except EmbeddingError:
+        return None
+    if (orientation_determinants(P, F) <= 0).any():
+        repair(P, max_repair_rounds)
+    return None if (orientation_determinants(P, F) <= 0).any() else P
+
+
+def _balanced(V, F, P, base, balance, area, repair, stretch_iterations, grid_level, say,
+              prefix=""):
+    """The candidates balanced from the fold-free start ``P`` (named ``base``): the start,
+    its stretch minimisation and, for "auto" and "density", the density flow from that (and
+    for "auto", where the full flow ends worse, its partial passes), names prefixed.
+    Returns (maps, their (stretch p99, max), their (stretch iterations, density steps))."""
+    candidates = {base: P}
+    steps = {base: (0, 0)}
+    if balance != "none":
+        runs = []
+        for tol in STRETCH_TOLERANCES:
+            Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations,
+                                        tolerance=tol, repair=repair)
+            runs.append((_stretch_p99(V, F, Ps, area)[0], Ps, info["accepted"]))
+            say(f"{prefix}stretch minimisation (tolerance {tol:g}): {info['accepted']} steps, "
+                f"log area ratio std {info['spread']:.2f}, stretch p99 {runs[-1][0]:.2f}")
+        # the first (strict) run unless a later one is clearly better
+        best = runs[0]
+        for run in runs[1:]:
+            if run[0] < PATIENT_GAIN * best[0]:
+                best = run
+        p99_stretch, Ps, n_stretch = best
+        candidates[prefix + "stretch"], steps[prefix + "stretch"] = Ps, (n_stretch, 0)
+        if balance in ("auto", "density"):
+            Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
+            candidates[prefix + "density"] = Pd
+            steps[prefix + "density"] = (n_stretch, info["steps"])
+            say(f"{prefix}density equalisation: {info['steps']} steps")
+            if balance == "auto" and _stretch_p99(V, F, Pd, area)[0] >= p99_stretch:
+                Pg, passes, n_staged = _staged_density(V, F, Ps, p99_stretch, area,
+                                                       grid_level, repair)
+                if passes:
+                    candidates[prefix + "staged"] = Pg
+                    steps[prefix + "staged"] = (n_stretch, n_staged)
+                    say(f"{prefix}the full flow did not help: {passes} partial pass(es) of "
+                        f"strength {STAGED_STRENGTH}, {n_staged} steps")
+    scores = {k: _stretch_p99(V, F, X, area) for k, X in candidates.items()}
+    return candidates, scores, steps
 
 
 def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
@@ -345,7 +418,9 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
         (largest singular value of the sphere-to-surface map, area-weighted), the quantity that
         limits how well a network on the sphere can fit the surface; where the density flow
         ends worse than the stretch minimisation, its partial passes are a fourth candidate
-        (``"staged"``, module docstring).
+        (``"staged"``, module docstring); where no candidate reaches a stretch p99 of
+        ``HALVES_GATE``, the same candidates balanced from
+        :func:`~sns_np.mesh.foldrepair.tutte_halves` too (``"halves+density"`` etc.).
     tau : float
         Time step of the flow, relative to the mesh normalised to unit area.
     max_steps : int
@@ -423,47 +498,44 @@ def spherical_embedding(V, F, *, balance: str = "auto", tau: float = 1e-2,
         P, base = tutte_sphere(V, F, repair.W), "tutte"
         folds_end = int((orientation_determinants(P, F) <= 0).sum())
         if folds_end:
+            # a long thin part telescoped beyond float64 (a blade, a limb): Tutte maps of
+            # two halves cut along the parts' length instead
+            say(f"{folds_end} folds in the Tutte embedding; trying two halves")
+            Ph = _halves(V, F, repair, max_repair_rounds)
+            if Ph is not None:
+                P, base, folds_end = Ph, "halves", 0
+        if folds_end:
             raise EmbeddingError(
                 f"spherical embedding still has {folds_end} folded triangle(s) after "
                 f"{max_repair_rounds} repair rounds and the Tutte fallback (flow: "
                 f"{folds_flow}, after centring: {folds_centre})")
     area = face_areas(V, F)
     d_conf = area_distortion(V, F, P)
-    candidates = {base: P}
-    n_stretch = n_density = 0
-    if balance != "none":
-        runs = []
-        for tol in STRETCH_TOLERANCES:
-            Ps, info = minimise_stretch(V, F, P, iterations=stretch_iterations,
-                                        tolerance=tol, repair=repair)
-            runs.append((_stretch_p99(V, F, Ps, area)[0], Ps, info["accepted"]))
-            say(f"stretch minimisation (tolerance {tol:g}): {info['accepted']} steps, log "
-                f"area ratio std {info['spread']:.2f}, stretch p99 {runs[-1][0]:.2f}")
-        # the first (strict) run unless a later one is clearly better
-        best = runs[0]
-        for run in runs[1:]:
-            if run[0] < PATIENT_GAIN * best[0]:
-                best = run
-        p99_stretch, Ps, n_stretch = best
-        candidates["stretch"] = Ps
-        if balance in ("auto", "density"):
-            Pd, info = equalise_areas(V, F, Ps, grid_level=grid_level, repair=repair)
-            candidates["density"], n_density = Pd, info["steps"]
-            say(f"density equalisation: {n_density} steps")
-            if balance == "auto" and _stretch_p99(V, F, Pd, area)[0] >= p99_stretch:
-                Pg, passes, n_staged = _staged_density(V, F, Ps, p99_stretch, area,
-                                                       grid_level, repair)
-                if passes:
-                    candidates["staged"] = Pg
-                    say(f"the full flow did not help: {passes} partial pass(es) of "
-                        f"strength {STAGED_STRENGTH}, {n_staged} steps")
-    scores = {k: _stretch_p99(V, F, X, area) for k, X in candidates.items()}
+    candidates, scores, steps_of = _balanced(V, F, P, base, balance, area, repair,
+                                             stretch_iterations, grid_level, say)
+    gated = set()
+    if (balance == "auto" and base != "halves"
+            and min(score[0] for score in scores.values()) > HALVES_GATE):
+        # long thin parts squeezed beyond what balancing recovers: the halves' route too
+        say(f"stretch p99 above {HALVES_GATE:g}: balancing two halves too")
+        Ph = _halves(V, F, repair, max_repair_rounds)
+        if Ph is not None:
+            more = _balanced(V, F, Ph, "halves", balance, area, repair, stretch_iterations,
+                             grid_level, say, prefix="halves+")
+            for mine, theirs in zip((candidates, scores, steps_of), more):
+                mine.update(theirs)
+            gated = set(more[0])
     if balance == "auto":
-        method = min(scores, key=lambda k: scores[k][0])
-        if method == "staged":
-            n_density = n_staged
+        method = min(scores.keys() - gated, key=lambda k: scores[k][0])
+        if gated:
+            # the halves' maps stretch the bulk of the surface more (a Tutte start is far
+            # from conformal), so they replace the others only with a clearly smaller tail
+            best = min(gated, key=lambda k: scores[k][0])
+            if scores[best][0] < HALVES_GAIN * scores[method][0]:
+                method = best
     else:
         method = {"none": base}.get(balance, balance)
+    n_stretch, n_density = steps_of[method]
     P = candidates[method]
     total = spherical_triangle_areas(P, F).sum()
     if (orientation_determinants(P, F) <= 0).any() or not abs(total - 4 * np.pi) < 1e-6:

@@ -26,7 +26,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .spherical import orientation_determinants
 
-__all__ = ["FoldRepair", "mean_value_weights", "tutte_sphere"]
+__all__ = ["FoldRepair", "mean_value_weights", "split_into_discs", "tutte_halves", "tutte_sphere"]
 
 
 def mean_value_weights(V, F) -> sp.csr_matrix:
@@ -311,4 +311,173 @@ def tutte_sphere(V, F, W=None, cap_degrees: float = 75.0) -> np.ndarray:
         X /= np.linalg.norm(X, axis=1, keepdims=True)
         if (orientation_determinants(X, F) > 0).sum() > F.shape[0] // 2:
             return X
+    return X
+
+
+#: smoothing steps of the face-normal indicator that splits a mesh into two halves
+HALVES_SMOOTHING = 10
+
+
+def _face_adjacency(F, h2e, n_edges):
+    """Faces sharing an edge, as a symmetric sparse matrix (every edge has two faces)."""
+    face = np.repeat(np.arange(F.shape[0]), 3)
+    order = np.argsort(h2e, kind="stable")
+    a, b = face[order[0::2]], face[order[1::2]]
+    m = F.shape[0]
+    return sp.csr_matrix((np.ones(2 * a.size), (np.r_[a, b], np.r_[b, a])), shape=(m, m))
+
+
+def _largest_part(G, mask, area):
+    """The face-connected component of ``mask`` with the largest area."""
+    idx = np.flatnonzero(mask)
+    k, label = connected_components(G[idx][:, idx], directed=False)
+    out = np.zeros_like(mask)
+    out[idx[label == np.argmax(np.bincount(label, weights=area[idx], minlength=k))]] = True
+    return out
+
+
+def split_into_discs(V, F, max_rounds: int = 50):
+    """Split a closed genus-0 mesh into two topological discs, a front and a back.
+
+    The direction ``e`` in which the mesh is thinnest (the smallest principal axis of its
+    area) defines the halves: faces whose normal, smoothed over ``HALVES_SMOOTHING`` rings,
+    points along ``e`` form the front, the others the back. On a long thin part (a blade, a
+    limb, a finger) that cut runs along its whole length, on both sides, so each half is a
+    strip rather than a tube. The front is then made a disc: its largest connected part,
+    with every part of the back not connected to the back's largest part added to it, and
+    every vertex where the boundary touches itself (the halves meet at a corner only)
+    given to the front, until the common boundary is one simple cycle.
+
+    Parameters
+    ----------
+    V : (n, 3) float array
+    F : (m, 3) int array, closed, genus 0, outward
+    max_rounds : int
+        Rounds of the repair of pinched boundary vertices.
+
+    Returns
+    -------
+    front : (m,) bool array, the faces of the first disc (the others form the second)
+    cycle : (k,) int array, the common boundary, in the order of the front's halfedges
+        (counter-clockwise around the front seen from outside)
+
+    Raises
+    ------
+    EmbeddingError
+        No split into two discs was found.
+
+    Examples
+    --------
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(2)
+    >>> front, cycle = split_into_discs(V * [1.0, 3.0, 0.3], F)     # thinnest along z
+    >>> bool(0.3 < front.mean() < 0.7), bool(abs(V[cycle, 2]).max() < 0.5)
+    (True, True)
+    """
+    from ._arrays import halfedges, unique_edges
+    from .errors import EmbeddingError
+    from .operators import face_areas
+
+    n = V.shape[0]
+    area = face_areas(V, F)
+    C = V[F].mean(axis=1)
+    X = C - (area[:, None] * C).sum(axis=0) / area.sum()
+    _, axes = np.linalg.eigh(np.einsum("f,fi,fj->ij", area, X, X))
+    N = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    h = N @ axes[:, 0]
+    tail, head = halfedges(F)
+    E, h2e, _ = unique_edges(F, n)
+    G = _face_adjacency(F, h2e, E.shape[0])
+    mean = sp.diags(1.0 / np.asarray(G.sum(axis=1)).ravel()) @ G
+    for _ in range(HALVES_SMOOTHING):
+        h = 0.5 * (h + mean @ h)
+    front = h > 0
+    for _ in range(max_rounds):
+        if front.all() or not front.any():
+            break
+        front = _largest_part(G, front, area)
+        front = ~_largest_part(G, ~front, area)
+        in_front = np.repeat(front, 3)
+        n_front = np.bincount(h2e, weights=in_front, minlength=E.shape[0])
+        boundary = in_front & (n_front[h2e] == 1)
+        out = np.bincount(tail[boundary], minlength=n)
+        pinched = np.flatnonzero(out > 1)
+        if pinched.size == 0:
+            nxt = np.full(n, -1)
+            nxt[tail[boundary]] = head[boundary]
+            cycle = [int(tail[boundary][0])]
+            while True:
+                v = int(nxt[cycle[-1]])
+                if v == cycle[0]:
+                    break
+                cycle.append(v)
+            if len(cycle) == int(boundary.sum()) >= 3:
+                return front, np.array(cycle)
+            break
+        front = front | np.isin(F, pinched).any(axis=1)
+    raise EmbeddingError("could not split the mesh into two discs along its thinnest direction")
+
+
+def tutte_halves(V, F, W=None) -> np.ndarray:
+    """A spherical embedding from Tutte maps of two halves of the mesh onto two hemispheres.
+
+    The mesh is split into two discs with a common boundary (:func:`split_into_discs`); the
+    boundary goes to the equator, spaced by edge length, each disc to the unit disc by
+    Tutte's method with mean-value weights (fold-free in the plane: Floater 2003) and on to
+    its hemisphere by stereographic projection. Unlike :func:`tutte_sphere`, whose boundary
+    is one vertex's ring, this leaves no long tube in either disc: a blade, a limb or a
+    finger is cut along its length, and a map that telescopes a tube into a point
+    (exponentially, beyond what float64 resolves) is avoided. Stereographic projection is
+    conformal but does not map straight edges to great circles, so a few large triangles can
+    fold; :class:`FoldRepair` removes them.
+
+    Parameters
+    ----------
+    V : (n, 3) float array
+    F : (m, 3) int array, closed, genus 0, outward
+    W : sparse (n, n), optional, row-normalised positive weights (mean-value by default)
+
+    Returns
+    -------
+    Vs : (n, 3) float array, unit vectors (the front on the southern hemisphere)
+
+    Raises
+    ------
+    EmbeddingError
+        No split into two discs was found.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sns_np.mesh import icosphere, orientation_determinants
+    >>> V, F = icosphere(3)
+    >>> Y = V * [1.0, 4.0, 0.2]
+    >>> X = tutte_halves(Y, F)
+    >>> _ = FoldRepair(Y, F)(X)                    # the folds of large triangles, if any
+    >>> int((orientation_determinants(X, F) <= 0).sum()), bool(np.allclose((X * X).sum(1), 1))
+    (0, True)
+    """
+    n = V.shape[0]
+    W = mean_value_weights(V, F) if W is None else W
+    front, cycle = split_into_discs(V, F)
+    seg = np.linalg.norm(V[np.roll(cycle, -1)] - V[cycle], axis=1)
+    theta = 2 * np.pi * np.concatenate([[0.0], np.cumsum(seg)[:-1]]) / seg.sum()
+    U = np.zeros((n, 2))
+    U[cycle] = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    X = np.zeros((n, 3))
+    on_cycle = np.zeros(n, dtype=bool)
+    on_cycle[cycle] = True
+    for half, z in ((front, -1.0), (~front, 1.0)):
+        inside = np.zeros(n, dtype=bool)
+        inside[F[half].ravel()] = True
+        inner = np.flatnonzero(inside & ~on_cycle)
+        if inner.size:
+            Wi = W[inner]
+            system = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
+            U[inner] = np.asarray(spla.spsolve(system, Wi[:, cycle] @ U[cycle])).reshape(-1, 2)
+        r2 = (U[inner] ** 2).sum(axis=1)
+        X[inner] = np.column_stack([2 * U[inner], z * (1 - r2)]) / (1 + r2)[:, None]
+    X[cycle, :2] = U[cycle]
+    if (orientation_determinants(X, F) > 0).sum() < F.shape[0] // 2:
+        X[:, 1] *= -1
     return X
