@@ -24,6 +24,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
+from ._arrays import halfedges, unique_edges
+from .errors import EmbeddingError
+from .operators import face_areas
 from .spherical import orientation_determinants
 
 __all__ = ["FoldRepair", "mean_value_weights", "split_into_discs", "tutte_halves", "tutte_sphere"]
@@ -318,7 +321,7 @@ def tutte_sphere(V, F, W=None, cap_degrees: float = 75.0) -> np.ndarray:
 HALVES_SMOOTHING = 10
 
 
-def _face_adjacency(F, h2e, n_edges):
+def _face_adjacency(F, h2e):
     """Faces sharing an edge, as a symmetric sparse matrix (every edge has two faces)."""
     face = np.repeat(np.arange(F.shape[0]), 3)
     order = np.argsort(h2e, kind="stable")
@@ -374,10 +377,6 @@ def split_into_discs(V, F, max_rounds: int = 50):
     >>> bool(0.3 < front.mean() < 0.7), bool(abs(V[cycle, 2]).max() < 0.5)
     (True, True)
     """
-    from ._arrays import halfedges, unique_edges
-    from .errors import EmbeddingError
-    from .operators import face_areas
-
     n = V.shape[0]
     area = face_areas(V, F)
     C = V[F].mean(axis=1)
@@ -387,7 +386,7 @@ def split_into_discs(V, F, max_rounds: int = 50):
     h = N @ axes[:, 0]
     tail, head = halfedges(F)
     E, h2e, _ = unique_edges(F, n)
-    G = _face_adjacency(F, h2e, E.shape[0])
+    G = _face_adjacency(F, h2e)
     mean = sp.diags(1.0 / np.asarray(G.sum(axis=1)).ravel()) @ G
     for _ in range(HALVES_SMOOTHING):
         h = 0.5 * (h + mean @ h)
@@ -406,12 +405,12 @@ def split_into_discs(V, F, max_rounds: int = 50):
             nxt = np.full(n, -1)
             nxt[tail[boundary]] = head[boundary]
             cycle = [int(tail[boundary][0])]
-            while True:
+            for _ in range(int(boundary.sum())):
                 v = int(nxt[cycle[-1]])
                 if v == cycle[0]:
                     break
                 cycle.append(v)
-            if len(cycle) == int(boundary.sum()) >= 3:
+            if len(cycle) == int(boundary.sum()) >= 3:     # one simple cycle
                 return front, np.array(cycle)
             break
         front = front | np.isin(F, pinched).any(axis=1)
