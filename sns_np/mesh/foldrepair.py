@@ -56,6 +56,14 @@ def mean_value_weights(V, F) -> sp.csr_matrix:
     return (sp.diags(1.0 / np.asarray(W.sum(axis=1)).ravel()) @ W).tocsr()
 
 
+def _tutte_solve(W, inner, fixed, U_fixed):
+    """Tutte's method: the planar positions of ``inner`` with each at the ``W``-weighted mean
+    of its neighbours, the vertices ``fixed`` held at ``U_fixed``."""
+    Wi = W[inner]
+    system = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
+    return np.asarray(spla.spsolve(system, Wi[:, fixed] @ U_fixed)).reshape(-1, 2)
+
+
 class FoldRepair:
     """Fold repair for embeddings of one surface mesh (caches its weights and adjacency).
 
@@ -164,9 +172,7 @@ class FoldRepair:
         e2 = np.cross(c, e1)
         Pb = P[boundary]
         ub = np.stack([Pb @ e1, Pb @ e2], axis=1) / (Pb @ c)[:, None]
-        Wi = self.W[inside]
-        system = sp.identity(inside.size, format="csc") - Wi[:, inside].tocsc()
-        u = np.asarray(spla.spsolve(system, Wi[:, boundary] @ ub)).reshape(-1, 2)
+        u = _tutte_solve(self.W, inside, boundary, ub)
         if not np.all(np.isfinite(u)):
             return False
         X = c + u[:, :1] * e1 + u[:, 1:] * e2
@@ -305,9 +311,7 @@ def tutte_sphere(V, F, W=None, cap_degrees: float = 75.0) -> np.ndarray:
     U[ring] = R * np.stack([np.cos(theta), np.sin(theta)], axis=1)
     inner = np.setdiff1d(np.arange(n), np.concatenate([[v0], ring]))
     if inner.size:
-        Wi = W[inner]
-        system = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
-        U[inner] = np.asarray(spla.spsolve(system, Wi[:, ring] @ U[ring])).reshape(-1, 2)
+        U[inner] = _tutte_solve(W, inner, ring, U[ring])
     for mirror in (1.0, -1.0):
         X = np.column_stack([U[:, 0], mirror * U[:, 1], -np.ones(n)])
         X[v0] = [0.0, 0.0, 1.0]
@@ -471,9 +475,7 @@ def tutte_halves(V, F, W=None) -> np.ndarray:
         inside[F[half].ravel()] = True
         inner = np.flatnonzero(inside & ~on_cycle)
         if inner.size:
-            Wi = W[inner]
-            system = sp.identity(inner.size, format="csc") - Wi[:, inner].tocsc()
-            U[inner] = np.asarray(spla.spsolve(system, Wi[:, cycle] @ U[cycle])).reshape(-1, 2)
+            U[inner] = _tutte_solve(W, inner, cycle, U[cycle])
         r2 = (U[inner] ** 2).sum(axis=1)
         X[inner] = np.column_stack([2 * U[inner], z * (1 - r2)]) / (1 + r2)[:, None]
     X[cycle, :2] = U[cycle]
