@@ -196,6 +196,21 @@ def test_minimise_stretch_reduces_distortion_monotonically():
     assert prev < 0.3 * d0
 
 
+def test_the_tutte_solve_puts_each_inner_vertex_at_its_neighbours_weighted_mean():
+    from sns_np.mesh.foldrepair import _tutte_solve, mean_value_weights
+    V, F = icosphere(2)
+    W = mean_value_weights(V * [1.0, 2.0, 0.5], F)
+    fixed = np.flatnonzero(V[:, 2] > 0.3)
+    inner = np.setdiff1d(np.arange(len(V)), fixed)
+    U = np.zeros((len(V), 2))
+    U[fixed] = np.random.default_rng(0).standard_normal((fixed.size, 2))
+    U[inner] = _tutte_solve(W, inner, fixed, U[fixed])
+    # Tutte's equations: each free vertex at the W-weighted mean of its neighbours (rows of
+    # W sum to 1), the fixed ones untouched
+    assert np.allclose(np.asarray(W.sum(axis=1)).ravel(), 1.0)
+    np.testing.assert_allclose(W[inner] @ U, U[inner], atol=1e-12)
+
+
 def test_tutte_sphere_is_fold_free_even_on_spiky_meshes():
     g = np.random.default_rng(0)
     for level in (0, 2, 3):
