@@ -82,6 +82,7 @@ from sns_np.mesh import (  # noqa: E402
     check,
     face_areas,
     load,
+    mass_matrix,
     sample_surface,
     spherical_embedding,
 )
@@ -208,8 +209,7 @@ def mesh_fidelity(S, V, F, n=20000, n_dense=100_000, Vs=None):
     d_back = np.linalg.norm(S(nearest_parameters(S, V, n_dense, Vs)) - V, axis=1)
     # the mesh side where the mesh is finest (the quarter of the vertices with the smallest
     # share of the area: fingers, faces), which a fit that skips small features leaves far
-    share = np.zeros(len(V))
-    np.add.at(share, F.ravel(), np.repeat(face_areas(V, F), 3))
+    share = mass_matrix(V, F, "barycentric").diagonal()
     dense = share <= np.quantile(share, 0.25)
     return {"surface_to_mesh": float(w @ d / diag),
             "mesh_to_surface": float(d_back.mean() / diag),
