@@ -124,7 +124,8 @@ def fit_options(args):
     keys = ("width", "depth", "steps", "batch", "time_budget", "dtype", "lr", "lr_min",
             "input_scale", "normal_weight", "smooth", "creases", "sampling", "optimizer",
             "vertex_fraction", "jacobian_weight", "hessian_weight", "tangent_weight",
-            "closest_after", "anchor_weight", "closest_normal_weight", "seed")
+            "closest_after", "anchor_weight", "closest_normal_weight",
+            "second_moment_decay", "seed")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -537,7 +538,7 @@ def main(argv=None):
                       ("vertex-fraction", float), ("jacobian-weight", float),
                       ("hessian-weight", float), ("tangent-weight", float),
                       ("closest-after", float), ("anchor-weight", float),
-                      ("closest-normal-weight", float)):
+                      ("closest-normal-weight", float), ("second-moment-decay", float)):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])

@@ -85,6 +85,16 @@ class Fraction:
             raise ValueError(f"{name} must lie in [0, 1], got {value!r}")
 
 
+class Decay:
+    """A number in [0, 1): the decay of a running mean."""
+
+    parse = float
+
+    def __call__(self, value, name):
+        if check_positive_float(value, name, allow_zero=True) >= 1.0:
+            raise ValueError(f"{name} must lie in [0, 1), got {value!r}")
+
+
 class Choice:
     """One of a few strings."""
 
@@ -273,6 +283,15 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 #: their figures were measured with.
 LR_MIN = {"embedding": 1e-5, "exact": 1e-6}
 
+#: SOAP's second-moment decay (Adam's ``b2``, in the eigenbasis of Shampoo's factors) that
+#: "auto" chooses, by how the target is parametrised. The second moment is kept by index
+#: while the eigenbases turn every 10 steps, and a short memory follows them: on a mesh it
+#: learns detail faster (armadillo21622, 540 s: normals 2.11 deg against 2.42, distance
+#: 3.45e-4 against 3.62e-4; docs/fitting.md, "SOAP's constants"). An analytic map's
+#: curvature wants the long one (BOBBLE, 540 s, H at the closest point 9.9% at 0.999 against
+#: 13.1% at 0.95). Adam and RMSProp keep their own.
+SECOND_MOMENT_DECAY = {"embedding": 0.95, "exact": 0.999}
+
 #: the normal weight of the nearest-point phase that "auto" chooses: ``CLOSEST_NORMAL_AREA``
 #: times the mesh's mean face area (normalised units, total 4 pi), at most
 #: ``CLOSEST_NORMAL_MAX``. The term then counts a normal error theta as the position error
@@ -412,6 +431,10 @@ class FitOptions(Options):
     lr_min: float | None = option(
         None, f"final learning rate of the cosine schedule (default: {LR_MIN['embedding']:g} "
         f"for a mesh, {LR_MIN['exact']:g} for an analytic map)", Real(allow_zero=True),
+        resume=True)
+    second_moment_decay: float | None = option(
+        None, f"SOAP's second-moment decay (default: {SECOND_MOMENT_DECAY['embedding']:g} for "
+        f"a mesh, {SECOND_MOMENT_DECAY['exact']:g} for an analytic map; SOAP only)", Decay(),
         resume=True)
     optimizer: str | None = option(
         None, f"optimiser; soap: Adam in the eigenbasis of Shampoo's factors for the hidden "

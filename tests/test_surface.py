@@ -5,6 +5,7 @@ import pytest
 
 from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
+from sns_np.nn.optim import make_optimizer
 from sns_np.options import (
     CLOSEST_NORMAL_AREA,
     CLOSEST_NORMAL_MAX,
@@ -13,6 +14,7 @@ from sns_np.options import (
     JACOBIAN_WEIGHT,
     LR_MIN,
     NORMAL_WEIGHT,
+    SECOND_MOMENT_DECAY,
 )
 from sns_np.shapes import Ellipsoid, Flower, RadialShape
 from sns_np.surface import (
@@ -296,6 +298,40 @@ def test_final_learning_rate_follows_the_parametrisation():
     assert r.options["lr_min"] == 3e-5 and "lr_min" not in r.choices
 
 
+def test_second_moment_decay_follows_the_parametrisation(monkeypatch):
+    """Auto, for SOAP: 0.95 on a mesh, 0.999 on an analytic map, recorded as a choice and
+    handed to the optimiser; Adam keeps its own unless one is given; an optimiser with no
+    second moment refuses one, before the embedding runs."""
+    import sns_np.surface.fit as fit_module
+    made = []
+
+    def spy(name, lr, **kw):
+        made.append((name, kw.get("betas")))
+        return make_optimizer(name, lr, **kw)
+
+    monkeypatch.setattr(fit_module, "make_optimizer", spy)
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    V, F = E.mesh(1)
+    _, r = fit_mesh(V, F, steps=2, **dict(TINY, optimizer="soap"))
+    assert r.options["second_moment_decay"] == SECOND_MOMENT_DECAY["embedding"] == 0.95
+    assert "mesh" in r.choices["second_moment_decay"]["why"]
+    assert made[-1] == ("soap", (0.9, 0.95))
+    _, r = fit_shape(E, steps=2, **dict(TINY, optimizer="soap"))
+    assert r.options["second_moment_decay"] == SECOND_MOMENT_DECAY["exact"] == 0.999
+    assert made[-1] == ("soap", (0.9, 0.999))
+    _, r = fit_shape(E, steps=2, **TINY)                     # Adam: its own, not a choice
+    assert r.options["second_moment_decay"] is None and "second_moment_decay" not in r.choices
+    assert made[-1] == ("adam", None)
+    _, r = fit_shape(E, steps=2, second_moment_decay=0.9, **TINY)     # given: kept
+    assert made[-1] == ("adam", (0.9, 0.9)) and "second_moment_decay" not in r.choices
+    n = len(made)
+    with pytest.raises(ValueError, match="optimizer='sgd' has none to set"):
+        fit_mesh(V, F, optimizer="sgd", second_moment_decay=0.9, Vs="not an embedding")
+    with pytest.raises(ValueError, match=r"second_moment_decay must lie in \[0, 1\), got 1"):
+        fit_shape(E, second_moment_decay=1.0, **TINY)
+    assert len(made) == n                                    # refused before any work
+
+
 @pytest.mark.slow_nojit
 def test_time_budget_tolerance_and_callback_stop():
     E = Ellipsoid(1.0, 1.3, 0.7)
@@ -418,7 +454,9 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert set(r.choices) == {"detail", "normal_detail", "input_scale", "lr", "warmup",
                               "batch", "sampling",
                               "optimizer", "width", "depth", "jacobian_weight",
-                              "hessian_weight", "closest_after", "lr_min"}
+                              "hessian_weight", "closest_after", "lr_min",
+                              "second_moment_decay"}
+    assert r.options["second_moment_decay"] == 0.999     # SOAP's long memory for a map
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 16.0

@@ -24,6 +24,7 @@ from ..options import (
     LR_MIN,
     NORMAL_DETAIL_RANGE,
     NORMAL_WEIGHT,
+    SECOND_MOMENT_DECAY,
 )
 from ..sampling import uniform_sphere
 
@@ -173,6 +174,27 @@ BY_PARAMETRISATION = {
                      "were measured with"}),
 }
 
+#: why SOAP's second-moment decay is what "auto" chooses (SECOND_MOMENT_DECAY)
+_DECAY_WHY = {
+    "exact": "SOAP on an analytic map: a long memory of the gradients' scale, which its "
+             "curvature wants",
+    "embedding": "SOAP on a mesh: a short memory follows the eigenbases as they turn, and "
+                 "detail is learnt faster"}
+
+#: the optimisers that take a second-moment decay (their ``betas[1]``)
+WITH_SECOND_MOMENT = ("adam", "soap")
+
+
+def second_moment_conflict(optimizer, decay):
+    """The error message when ``decay`` (``second_moment_decay``) is given to an optimiser
+    without a second moment, else None."""
+    if decay is None or optimizer is None or optimizer in WITH_SECOND_MOMENT:
+        return None
+    return (f"second_moment_decay={decay:g} is the second-moment decay of "
+            f"{' and '.join(WITH_SECOND_MOMENT)}; optimizer={optimizer!r} has none to set: "
+            f"leave second_moment_decay unset or choose one of those")
+
+
 #: the options of the losses on an analytic map's derivatives, and what they match
 DERIVATIVE_WEIGHTS = {"jacobian_weight": (JACOBIAN_WEIGHT, "derivatives"),
                       "hessian_weight": (HESSIAN_WEIGHT, "second derivatives")}
@@ -300,6 +322,13 @@ def _plan(target, o, net, elapsed=0.0):
         if o[name] is None:
             o[name] = auto[param]
             choices[name] = {"value": o[name], "why": why[param]}
+    conflict = second_moment_conflict(o["optimizer"], o["second_moment_decay"])
+    if conflict:
+        raise ValueError(conflict)
+    if o["second_moment_decay"] is None and o["optimizer"] == "soap":
+        o["second_moment_decay"] = SECOND_MOMENT_DECAY[param]
+        choices["second_moment_decay"] = {"value": o["second_moment_decay"],
+                                          "why": _DECAY_WHY[param]}
     for name, (auto, what) in DERIVATIVE_WEIGHTS.items():
         if o[name] is None:
             o[name] = auto["exact" if exact else "embedding"]
