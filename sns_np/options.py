@@ -288,8 +288,8 @@ LR_MIN = {"embedding": 1e-5, "exact": 1e-6}
 #: while the eigenbases turn every 10 steps, and a short memory follows them: on a mesh it
 #: learns detail faster (armadillo21622, 540 s: normals 2.11 deg against 2.42, distance
 #: 3.45e-4 against 3.62e-4; docs/fitting.md, "SOAP's constants"). An analytic map's
-#: curvature wants the long one (BOBBLE, 540 s, H at the closest point 9.9% at 0.999 against
-#: 13.1% at 0.95). Adam and RMSProp keep their own.
+#: curvature wants the long one (BOBBLE's exact map, 540 s on 2026-12-01: H at the closest
+#: point 9.9% at 0.999 against 13.1% at 0.95). "auto" leaves Adam its own 0.999.
 SECOND_MOMENT_DECAY = {"embedding": 0.95, "exact": 0.999}
 
 #: the normal weight of the nearest-point phase that "auto" chooses: ``CLOSEST_NORMAL_AREA``
@@ -433,9 +433,9 @@ class FitOptions(Options):
         f"for a mesh, {LR_MIN['exact']:g} for an analytic map)", Real(allow_zero=True),
         resume=True)
     second_moment_decay: float | None = option(
-        None, f"SOAP's second-moment decay (default: {SECOND_MOMENT_DECAY['embedding']:g} for "
-        f"a mesh, {SECOND_MOMENT_DECAY['exact']:g} for an analytic map; SOAP only)", Decay(),
-        resume=True)
+        None, f"second-moment decay of Adam and SOAP (default for SOAP: "
+        f"{SECOND_MOMENT_DECAY['embedding']:g} for a mesh, {SECOND_MOMENT_DECAY['exact']:g} "
+        f"for an analytic map; Adam's own 0.999)", Decay(), resume=True)
     optimizer: str | None = option(
         None, f"optimiser; soap: Adam in the eigenbasis of Shampoo's factors for the hidden "
         f"matrices (default: {_auto('optimizer')})", Choice("adam", "rmsprop", "sgd", "soap"),
