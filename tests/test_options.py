@@ -125,3 +125,23 @@ def test_add_arguments_checks_as_the_library_does():
         p.parse_args(["--points", "8"])
     with pytest.raises(argparse.ArgumentError, match="expected an integer, got 'many'"):
         p.parse_args(["--points", "many"])
+
+
+def test_second_moment_decay_flag_says_who_takes_it_and_checks_as_the_library_does():
+    """``sns-np fit --second-moment-decay``: the help names both optimisers that have a second
+    moment and the defaults "auto" takes from SECOND_MOMENT_DECAY; the value is parsed and
+    refused as FitOptions does."""
+    from sns_np.options import SECOND_MOMENT_DECAY
+    p = _subparser("fit")
+    text = " ".join(p.format_help().split())
+    assert "--second-moment-decay" in text
+    help_text = " ".join(FitOptions.help("second_moment_decay").split())
+    assert "Adam and SOAP" in help_text and "Adam's own 0.999" in help_text
+    assert f"{SECOND_MOMENT_DECAY['embedding']:g} for a mesh" in help_text
+    assert f"{SECOND_MOMENT_DECAY['exact']:g} for an analytic map" in help_text
+    args = p.parse_args(["mesh.obj", "-o", "m.npz", "--second-moment-decay", "0.9"])
+    assert given_arguments(args, ["second_moment_decay"]) == {"second_moment_decay": 0.9}
+    q = argparse.ArgumentParser(prog="x", exit_on_error=False)
+    add_arguments(q, FitOptions, ["second_moment_decay"])
+    with pytest.raises(argparse.ArgumentError, match=r"second_moment_decay must lie in \[0, 1\)"):
+        q.parse_args(["--second-moment-decay", "1"])
