@@ -60,7 +60,7 @@ def _positive_float(text):
 
 #: the fitting options on the command line (``fit``, ``demo``, ``batch fit``), in help order
 FIT_FLAGS = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-             "second_moment_decay", "normal_weight", "input_scale", "sampling",
+             "second_moment_decay", "normal_weight", "normal_huber", "input_scale", "sampling",
              "vertex_fraction", "dtype", "seed")
 
 def _add_fit_options(p):

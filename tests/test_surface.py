@@ -13,6 +13,7 @@ from sns_np.options import (
     HESSIAN_WEIGHT,
     JACOBIAN_WEIGHT,
     LR_MIN,
+    NORMAL_HUBER,
     NORMAL_WEIGHT,
     SECOND_MOMENT_DECAY,
 )
@@ -23,6 +24,7 @@ from sns_np.surface import (
     fit_shape,
     hessian_loss,
     jacobian_loss,
+    normals_from_tangents,
     position_normal_loss,
 )
 from sns_np.testing import check_directional_jet, check_jet
@@ -91,6 +93,45 @@ def test_position_normal_loss_cotangents_by_differences():
         e = np.zeros_like(JD)
         e[idx] = h
         assert np.isclose((f(y, JD + e) - f(y, JD - e)) / (2 * h), dJD[idx], atol=1e-8)
+
+
+def test_huber_normal_loss_by_differences_and_its_limits():
+    """The pseudo-Huber normal term: cotangents match central differences (with importance
+    weights); each point counts 2 d^2 (sqrt(1 + s / d^2) - 1) for a squared error s, d the
+    chord of the angle; the reported normal error stays squared; far below the angle it is
+    the squared loss."""
+    g = np.random.default_rng(3)
+    y, JD = g.standard_normal((7, 3)), g.standard_normal((7, 3, 2))
+    q, nt = g.standard_normal((7, 3)), g.standard_normal((7, 3))
+    nt /= np.linalg.norm(nt, axis=1, keepdims=True)
+    sw = g.uniform(0.5, 2.0, 7)
+
+    def loss(y_, JD_, q_=q, nt_=nt, huber=5.0):
+        return position_normal_loss(y_, JD_, q_, nt_, 7, 0.3, sample_weight=sw,
+                                    normal_huber=huber)
+
+    _, dy, dJD, _ = loss(y, JD)
+    h = 1e-6
+    for x, d in ((y, dy), (JD, dJD)):
+        for idx in np.ndindex(*x.shape):
+            e = np.zeros_like(x)
+            e[idx] = h
+            plus = loss(y + e, JD)[0] if x is y else loss(y, JD + e)[0]
+            minus = loss(y - e, JD)[0] if x is y else loss(y, JD - e)[0]
+            assert np.isclose((plus - minus) / (2 * h), d[idx], atol=1e-8)
+    n = normals_from_tangents(JD[:, :, 0], JD[:, :, 1])[0]
+    s = np.sum((n - nt) ** 2, axis=1)
+    d2 = (2 * np.sin(np.radians(2.5))) ** 2
+    val, _, _, parts = loss(y, JD, q_=y)                   # no position error
+    assert val == pytest.approx(0.3 * sw @ (2 * d2 * (np.sqrt(1 + s / d2) - 1)) / 7)
+    assert parts["normal"] == pytest.approx(sw @ s)
+    assert val < 0.3 * sw @ s / 7                          # large errors count less
+    near = n + 1e-4 * g.standard_normal(n.shape)           # errors of about 0.01 degrees
+    near /= np.linalg.norm(near, axis=1, keepdims=True)
+    robust, dy_r, dJD_r, _ = loss(y, JD, nt_=near)
+    plain, dy_p, dJD_p, _ = loss(y, JD, nt_=near, huber=0.0)
+    assert robust == pytest.approx(plain, rel=1e-6)
+    assert np.allclose(dJD_r, dJD_p, rtol=1e-5, atol=1e-12) and np.array_equal(dy_r, dy_p)
 
 
 def test_jacobian_loss_cotangent_by_differences():
@@ -330,6 +371,43 @@ def test_second_moment_decay_follows_the_parametrisation(monkeypatch):
     with pytest.raises(ValueError, match=r"second_moment_decay must lie in \[0, 1\), got 1"):
         fit_shape(E, second_moment_decay=1.0, **TINY)
     assert len(made) == n                                    # refused before any work
+
+
+def test_normal_huber_follows_the_parametrisation(monkeypatch):
+    """Auto: 4 degrees on a mesh, 0 (squared) on an analytic map and on a warm start,
+    recorded as a choice and handed to the loss; a given angle is kept; an angle outside [0,
+    180] is refused before the embedding runs."""
+    import sns_np.surface.fit as fit_module
+    seen = []
+
+    def spy(*args, **kw):
+        seen.append(kw["normal_huber"])
+        return position_normal_loss(*args, **kw)
+
+    monkeypatch.setattr(fit_module, "position_normal_loss", spy)
+    E = Ellipsoid(1.0, 1.3, 0.7)
+    V, F = E.mesh(1)
+    S, r = fit_mesh(V, F, steps=2, **TINY)
+    assert r.options["normal_huber"] == NORMAL_HUBER["embedding"] == 4.0
+    assert "mean angle" in r.choices["normal_huber"]["why"] and set(seen) == {4.0}
+    seen.clear()
+    _, r = fit_shape(E, steps=2, **TINY)
+    assert r.options["normal_huber"] == NORMAL_HUBER["exact"] == 0.0
+    assert "exact" in r.choices["normal_huber"]["why"] and set(seen) == {0.0}
+    seen.clear()
+    warm = {k: v for k, v in TINY.items() if k not in ("width", "depth")}
+    _, r = fit_mesh(V, F, steps=2, net=S.net, **warm)
+    assert r.options["normal_huber"] == 0.0 and "warm start" in r.choices["normal_huber"]["why"]
+    assert set(seen) == {0.0}
+    seen.clear()
+    _, r = fit_mesh(V, F, steps=2, normal_huber=7.5, **TINY)
+    assert r.options["normal_huber"] == 7.5 and "normal_huber" not in r.choices
+    assert set(seen) == {7.5}
+    seen.clear()
+    for bad, msg in ((-1.0, "normal_huber must be"), (200.0, r"angle in degrees in \[0, 180\]")):
+        with pytest.raises(ValueError, match=msg):
+            fit_mesh(V, F, normal_huber=bad, Vs="not an embedding")
+    assert seen == []
 
 
 @pytest.mark.slow_nojit

@@ -23,6 +23,7 @@ from ..options import (
     JACOBIAN_WEIGHT,
     LR_MIN,
     NORMAL_DETAIL_RANGE,
+    NORMAL_HUBER,
     NORMAL_WEIGHT,
     SECOND_MOMENT_DECAY,
 )
@@ -167,6 +168,11 @@ BY_PARAMETRISATION = {
         "exact": "an exact parametrisation (an analytic map): the position term leads",
         "embedding": "a parametrisation through a spherical embedding: the normals steer the "
                      "fit past its tangential noise"}),
+    "normal_huber": (NORMAL_HUBER, {
+        "exact": "an exact parametrisation (an analytic map): the squared normal loss, as "
+                 "measured",
+        "embedding": "a mesh, judged by its mean angle: errors beyond this count by their "
+                     "size, so a few large ones do not steer the fit"}),
     "lr_min": (LR_MIN, {
         "exact": "an exact parametrisation (an analytic map): the last steps at a lower rate "
                  "end nearer its exact targets",
@@ -281,6 +287,10 @@ def _plan(target, o, net, elapsed=0.0):
         for k in ("width", "depth"):
             if o[k] is None:
                 o[k] = getattr(net, k)
+        if o["normal_huber"] is None:
+            o["normal_huber"] = 0.0
+            choices["normal_huber"] = {"value": 0.0, "why": "a warm start: the squared normal "
+                                       "loss, as its figures were measured"}
     # "exact" for an analytic map; anything else is parametrised like a mesh
     param = "exact" if getattr(target, "parametrisation", None) == "exact" else "embedding"
     todo = [k for k in ("input_scale", "lr", "warmup", "batch", "sampling", "optimizer",

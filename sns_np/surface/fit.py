@@ -89,7 +89,8 @@ class FitReport:
     (20, 'step budget', 4.0)
     >>> sorted(report.choices)                         # what "auto" chose, and why
     ['closest_after', 'detail', 'hessian_weight', 'input_scale', 'jacobian_weight', 'lr',
-     'lr_min', 'normal_detail', 'normal_weight', 'optimizer', 'sampling', 'warmup']
+     'lr_min', 'normal_detail', 'normal_huber', 'normal_weight', 'optimizer', 'sampling',
+     'warmup']
     """
 
     steps: int = 0
@@ -374,6 +375,13 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         reference's 1e-4 would leave nothing to steer past it; 0.1 for an analytic map, whose
         parametrisation is exact and where weight 1 lets the network trade position for
         normals. docs/fitting.md measures both.
+    normal_huber : float, degrees in [0, 180]
+        The angle beyond which a point's normal error counts by its size, not its square (a
+        pseudo-Huber loss, :func:`~sns_np.surface.losses.position_normal_loss`), in both
+        phases of a mesh's fit; 0: squared throughout. Default (``NORMAL_HUBER``): 4 for a
+        mesh, judged by its mean angle, where the squared loss lets a few points of large
+        error (fingers, ears, targets that disagree) steer the fit; 0 for an analytic map and
+        a warm start. docs/fitting.md, "A robust normal loss", measures it.
     jacobian_weight : float
         Weight of the loss on the derivatives along the sphere, ``|dS(e_u) - dS_t(e_u)|^2 +
         |dS(e_v) - dS_t(e_v)|^2`` (:func:`~sns_np.surface.losses.jacobian_loss`), for a
@@ -619,8 +627,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                             qn, nn = (a.astype(t_dtype) for a in target.closest(y))
                             val, dy, dJD, pr = position_normal_loss(
                                 y, JD, qn, nn, len(p), o["closest_normal_weight"],
-                                sample_weight=sw,
-                                pointwise=errors is not None)
+                                sample_weight=sw, pointwise=errors is not None,
+                                normal_huber=o["normal_huber"])
                             if o["anchor_weight"]:
                                 va, dya, _, _ = position_normal_loss(
                                     y, None, qc[sl], None, len(p), 0.0, sample_weight=sw)
@@ -629,7 +637,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                         else:
                             val, dy, dJD, pr = position_normal_loss(
                                 y, JD, qc[sl], ntc[sl], len(p), w, tangent_weight=tw,
-                                sample_weight=sw, pointwise=errors is not None)
+                                sample_weight=sw, pointwise=errors is not None,
+                                normal_huber=o["normal_huber"])
                         if wj:
                             val_j, dJD_j, _ = jacobian_loss(JD, JTc[sl], len(p), wj,
                                                             sample_weight=sw)

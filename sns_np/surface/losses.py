@@ -16,6 +16,15 @@ Cotangents, with g = dL/dc:
     g       = (I - n n^T) dL/dn / |c|         (derivative of c -> c / |c|)
     dL/dS_u = S_v x g,   dL/dS_v = g x S_u     (from d(S_u x S_v) . g)
 
+With ``normal_huber`` (an angle delta, chord d = 2 sin(delta / 2)) each point's squared
+normal error s = |n - n_i|^2 enters through the pseudo-Huber function
+
+    rho(s) = 2 d^2 (sqrt(1 + s / d^2) - 1),     rho'(s) = 1 / sqrt(1 + s / d^2),
+
+which is s for s << d^2 and grows like 2 d |n - n_i| beyond: errors larger than delta count
+by their size, not its square, so a few points with large errors no longer steer the fit
+(the fit is judged by the mean angle). dL/dn is then scaled by rho'(s) per point.
+
 Jacobian loss (an analytic map, whose derivatives along the sphere are exact data):
 
     loss = mu 1/N sum |JD_i - T_i|^2_F,     dL/dJD = 2 mu (JD - T) / N
@@ -39,7 +48,8 @@ __all__ = ["hessian_loss", "jacobian_loss", "normals_from_tangents", "position_n
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
-                         tangent_weight=1.0, sample_weight=None, pointwise=False):
+                         tangent_weight=1.0, sample_weight=None, pointwise=False,
+                         normal_huber=0.0):
     """Position + normal loss on one chunk and its cotangents.
 
     Parameters
@@ -59,6 +69,10 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     pointwise : bool
         Also return each point's unweighted error ``|r|^2 + lambda |n - n_i|^2`` as
         ``parts["pointwise"]`` (what an error-weighted sampler observes).
+    normal_huber : float, degrees
+        The angle beyond which a point's normal error counts linearly, not quadratically
+        (the pseudo-Huber function of the module docstring); 0: squared throughout. The
+        summed normal error in ``parts`` and the pointwise errors stay squared.
 
     Returns
     -------
@@ -77,6 +91,10 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     (0.25, [[-1.0, 0.0, 0.0]])
     >>> position_normal_loss(y, JD, q, nt, 1, 1.0, tangent_weight=0.1)[0]   # all normal
     0.25
+    >>> nt = np.array([[0.0, 1.0, 0.0]])             # 90 degrees off: squared error 2
+    >>> [round(position_normal_loss(y, JD, q, nt, 1, 1.0, normal_huber=h)[0] - 0.25, 4)
+    ...  for h in (0.0, 2.0, 180.0)]
+    [2.0, 0.0963, 1.798]
     """
     r = scale * y - q
     if tangent_weight != 1.0:
@@ -107,10 +125,16 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     dn = n - normals
     per_nrm = np.einsum("ij,ij->i", dn, dn)
     sq_nrm = total(per_nrm)
-    loss += normal_weight * sq_nrm / n_total
     parts["normal"] = sq_nrm
     if pointwise:
         parts["pointwise"] = per_loss + normal_weight * per_nrm
+    if normal_huber:
+        d2 = 4.0 * np.sin(np.radians(normal_huber) / 2.0) ** 2
+        root = np.sqrt(1.0 + per_nrm / d2)
+        loss += normal_weight * total(2.0 * d2 * (root - 1.0)) / n_total
+        dn = dn / root[:, None]
+    else:
+        loss += normal_weight * sq_nrm / n_total
     if sample_weight is not None:
         dn = sample_weight[:, None] * dn
     gn = (2.0 * normal_weight / n_total) * dn
