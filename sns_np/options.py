@@ -289,10 +289,12 @@ NORMAL_WEIGHT = {"embedding": 1.0, "exact": 0.1}
 #: square (a pseudo-Huber loss, ``position_normal_loss``'s ``normal_huber``), that "auto"
 #: chooses, by how the target is parametrised. A mesh's fit is judged by its mean angle, and
 #: with the squared loss its points of large error (fingers, ears; targets that disagree)
-#: steer it: armadillo21622, 540 s, one thread, two fits at once, normals 2.15-2.19 deg
-#: against 2.37, distance 3.34e-4-3.40e-4 against 3.60e-4 (docs/fitting.md, "A robust
-#: normal loss"). An analytic map's normals are exact and were not measured with it: 0, the
-#: squared loss. A warm start (flows, refits) keeps the squared loss.
+#: steer it. 540 s, one thread, two fits at once, against the squared loss: armadillo21622
+#: normals 2.15 deg against 2.37, distance 3.37e-4 against 3.60e-4; max10606 0.69 against
+#: 0.76 deg, decimated_max 1.22 against 1.34, spot 0.76 against 0.74, SPIKE's mesh level
+#: (docs/fitting.md, "A robust normal loss"). A coarse mesh keeps the squared loss (BOBBLE's
+#: mesh: H 45% against 39%). An analytic map's normals are exact and were not measured with
+#: it, nor a warm start (flows, refits): 0, the squared loss.
 NORMAL_HUBER = {"embedding": 4.0, "exact": 0.0}
 
 #: the final learning rate of the cosine schedule that "auto" chooses, by how the target is

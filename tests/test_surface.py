@@ -374,9 +374,9 @@ def test_second_moment_decay_follows_the_parametrisation(monkeypatch):
 
 
 def test_normal_huber_follows_the_parametrisation(monkeypatch):
-    """Auto: 4 degrees on a mesh, 0 (squared) on an analytic map and on a warm start,
-    recorded as a choice and handed to the loss; a given angle is kept; an angle outside [0,
-    180] is refused before the embedding runs."""
+    """Auto: 4 degrees on a mesh, 0 (squared) on a coarse mesh, an analytic map and a warm
+    start, recorded as a choice and handed to the loss; a given angle is kept; an angle
+    outside [0, 180] is refused before the embedding runs."""
     import sns_np.surface.fit as fit_module
     seen = []
 
@@ -386,21 +386,28 @@ def test_normal_huber_follows_the_parametrisation(monkeypatch):
 
     monkeypatch.setattr(fit_module, "position_normal_loss", spy)
     E = Ellipsoid(1.0, 1.3, 0.7)
-    V, F = E.mesh(1)
-    S, r = fit_mesh(V, F, steps=2, **TINY)
+    V, F = E.mesh(4)
+    Vs = V / np.linalg.norm(V, axis=1, keepdims=True)          # a radial mesh's embedding
+    S, r = fit_mesh(V, F, Vs=Vs, steps=2, **TINY)
     assert r.options["normal_huber"] == NORMAL_HUBER["embedding"] == 4.0
     assert "mean angle" in r.choices["normal_huber"]["why"] and set(seen) == {4.0}
+    seen.clear()
+    V2, F2 = E.mesh(2)                                         # coarse by its Phong gap
+    _, r = fit_mesh(V2, F2, Vs=V2 / np.linalg.norm(V2, axis=1, keepdims=True), steps=2,
+                    **TINY)
+    assert r.options["normal_huber"] == 0.0 and set(seen) == {0.0}
+    assert "a coarse mesh" in r.choices["normal_huber"]["why"]
     seen.clear()
     _, r = fit_shape(E, steps=2, **TINY)
     assert r.options["normal_huber"] == NORMAL_HUBER["exact"] == 0.0
     assert "exact" in r.choices["normal_huber"]["why"] and set(seen) == {0.0}
     seen.clear()
     warm = {k: v for k, v in TINY.items() if k not in ("width", "depth")}
-    _, r = fit_mesh(V, F, steps=2, net=S.net, **warm)
+    _, r = fit_mesh(V, F, Vs=Vs, steps=2, net=S.net, **warm)
     assert r.options["normal_huber"] == 0.0 and "warm start" in r.choices["normal_huber"]["why"]
     assert set(seen) == {0.0}
     seen.clear()
-    _, r = fit_mesh(V, F, steps=2, normal_huber=7.5, **TINY)
+    _, r = fit_mesh(V, F, Vs=Vs, steps=2, normal_huber=7.5, **TINY)
     assert r.options["normal_huber"] == 7.5 and "normal_huber" not in r.choices
     assert set(seen) == {7.5}
     seen.clear()

@@ -270,6 +270,13 @@ def _plan(target, o, net, elapsed=0.0):
                        f"positions"}
         else:       # no faces to measure (or no nearest points at all): the safe cap
             o["closest_normal_weight"] = CLOSEST_NORMAL_MAX
+    if o["normal_huber"] is None and nearest:
+        coarse, kind = _coarse(target)
+        if coarse:
+            o["normal_huber"] = 0.0
+            choices["normal_huber"] = {
+                "value": 0.0, "why": f"{kind}: its interpolated normals are guesses; the "
+                                     f"squared normal loss, as its figures were measured"}
     exact = hasattr(target, "sample_jet")     # derivatives along the sphere as data
     for name in DERIVATIVE_WEIGHTS:
         if o[name] and not exact:

@@ -380,8 +380,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         pseudo-Huber loss, :func:`~sns_np.surface.losses.position_normal_loss`), in both
         phases of a mesh's fit; 0: squared throughout. Default (``NORMAL_HUBER``): 4 for a
         mesh, judged by its mean angle, where the squared loss lets a few points of large
-        error (fingers, ears, targets that disagree) steer the fit; 0 for an analytic map and
-        a warm start. docs/fitting.md, "A robust normal loss", measures it.
+        error (fingers, ears, targets that disagree) steer the fit; 0 for a coarse mesh,
+        whose interpolated normals are guesses, an analytic map and a warm start.
+        docs/fitting.md, "A robust normal loss", measures it.
     jacobian_weight : float
         Weight of the loss on the derivatives along the sphere, ``|dS(e_u) - dS_t(e_u)|^2 +
         |dS(e_v) - dS_t(e_v)|^2`` (:func:`~sns_np.surface.losses.jacobian_loss`), for a
