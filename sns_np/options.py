@@ -481,8 +481,8 @@ class FitOptions(Options):
     normal_huber: float | None = option(
         None, f"angle in degrees beyond which a point's normal error counts by its size, not "
         f"its square (a pseudo-Huber loss; 0: squared throughout; default: "
-        f"{NORMAL_HUBER['embedding']:g} for a mesh, {NORMAL_HUBER['exact']:g} for an analytic "
-        f"map or a warm start)", Angle(), resume=True)
+        f"{NORMAL_HUBER['embedding']:g} for a mesh, {NORMAL_HUBER['exact']:g} for a coarse "
+        f"mesh, an analytic map or a warm start)", Angle(), resume=True)
     jacobian_weight: float | None = option(
         None, f"weight of the loss on the derivatives along the sphere (default: "
         f"{JACOBIAN_WEIGHT['exact']:g} for an analytic map, whose derivatives are exact; a "

@@ -129,7 +129,7 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     if pointwise:
         parts["pointwise"] = per_loss + normal_weight * per_nrm
     if normal_huber:
-        d2 = 4.0 * np.sin(np.radians(normal_huber) / 2.0) ** 2
+        d2 = 4.0 * float(np.sin(np.radians(normal_huber) / 2.0)) ** 2   # keeps the dtype
         root = np.sqrt(1.0 + per_nrm / d2)
         loss += normal_weight * total(2.0 * d2 * (root - 1.0)) / n_total
         dn = dn / root[:, None]
