@@ -540,8 +540,9 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
                               "batch", "sampling",
                               "optimizer", "width", "depth", "jacobian_weight",
                               "hessian_weight", "closest_after", "lr_min",
-                              "second_moment_decay"}
+                              "second_moment_decay", "normal_huber"}
     assert r.options["second_moment_decay"] == 0.999     # SOAP's long memory for a map
+    assert r.options["normal_huber"] == 0.0              # exact normals: the squared loss
     assert r.options["lr_min"] == 1e-6                # an exact map ends lower than a mesh
     assert r.options["closest_after"] == 1.0          # no mesh: the map's own targets
     assert S.metadata["fit"]["choices"]["input_scale"]["value"] == 16.0
