@@ -125,7 +125,7 @@ def fit_options(args):
             "input_scale", "normal_weight", "smooth", "creases", "sampling", "optimizer",
             "vertex_fraction", "jacobian_weight", "hessian_weight", "tangent_weight",
             "closest_after", "anchor_weight", "closest_normal_weight",
-            "second_moment_decay", "normal_huber", "seed")
+            "second_moment_decay", "normal_huber", "area_weight_max", "seed")
     return {k: getattr(args, k) for k in keys if getattr(args, k) is not None}
 
 
@@ -539,7 +539,7 @@ def main(argv=None):
                       ("hessian-weight", float), ("tangent-weight", float),
                       ("closest-after", float), ("anchor-weight", float),
                       ("closest-normal-weight", float), ("second-moment-decay", float),
-                      ("normal-huber", float)):
+                      ("normal-huber", float), ("area-weight-max", float)):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
     ap.add_argument("--smooth", choices=["phong", "none"])

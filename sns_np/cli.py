@@ -60,8 +60,8 @@ def _positive_float(text):
 
 #: the fitting options on the command line (``fit``, ``demo``, ``batch fit``), in help order
 FIT_FLAGS = ("steps", "time_budget", "tol", "width", "depth", "batch", "lr", "optimizer",
-             "second_moment_decay", "normal_weight", "normal_huber", "input_scale", "sampling",
-             "vertex_fraction", "dtype", "seed")
+             "second_moment_decay", "normal_weight", "normal_huber", "area_weight_max",
+             "input_scale", "sampling", "vertex_fraction", "dtype", "seed")
 
 def _add_fit_options(p):
     from .options import MESH_SMOOTHING, FitOptions, add_arguments

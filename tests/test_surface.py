@@ -7,6 +7,7 @@ from sns_np.errors import DivergenceError, ModelFileError
 from sns_np.nn import ResidualMLP
 from sns_np.nn.optim import make_optimizer
 from sns_np.options import (
+    AREA_WEIGHT_MAX,
     CLOSEST_NORMAL_AREA,
     CLOSEST_NORMAL_MAX,
     COARSE_CLOSEST_NORMAL,
@@ -25,6 +26,7 @@ from sns_np.surface import (
     hessian_loss,
     jacobian_loss,
     normals_from_tangents,
+    own_area_weights,
     position_normal_loss,
 )
 from sns_np.testing import check_directional_jet, check_jet
@@ -415,6 +417,91 @@ def test_normal_huber_follows_the_parametrisation(monkeypatch):
         with pytest.raises(ValueError, match=msg):
             fit_mesh(V, F, normal_huber=bad, Vs="not an embedding")
     assert seen == []
+
+
+def test_own_area_weights_match_an_ellipsoids_area_element():
+    """The map x -> diag(a, b, c) x on the unit sphere has the area element
+    abc sqrt(x^2/a^2 + y^2/b^2 + z^2/c^2) (the cofactor of the matrix applied to the normal);
+    the weights are it over the given density, clipped to [1/m, m]."""
+    from sns_np.geometry import tangent_frame
+    a, b, c = 1.0, 1.3, 0.7
+    p = sphere_points(400, seed=3)
+    JD = np.einsum("ij,kjd->kid", np.diag([a, b, c]), tangent_frame(p))
+    area = a * b * c * np.sqrt(((p / [a, b, c]) ** 2).sum(axis=1))
+    density = np.random.default_rng(0).uniform(0.1, 3.0, len(p))
+    w = own_area_weights(JD, density, 4.0)
+    np.testing.assert_allclose(w, np.clip(area / density, 0.25, 4.0), rtol=1e-12)
+    assert 0 < (w == 4.0).sum() < len(p) and 0 < (w == 0.25).sum() < len(p)   # both clips
+    assert own_area_weights(JD.astype(np.float32), density, 2.0).dtype == np.float32
+    np.testing.assert_array_equal(own_area_weights(JD, density, 1.0), 1.0)
+    with pytest.raises(ValueError, match="most must be a factor >= 1, got 0.5"):
+        own_area_weights(JD, density, 0.5)
+
+
+def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
+    """In the phase each point's terms are weighted by the network's area element over the
+    embedding's (measured here from the mesh and its embedding, not from the target), before
+    it not at all; "auto" takes AREA_WEIGHT_MAX when the phase runs and 0 otherwise, and
+    records why; weights that cannot act are refused before the embedding runs."""
+    import sns_np.surface._targets as targets_module
+    import sns_np.surface.fit as fit_module
+    from sns_np.mesh import face_areas
+    from sns_np.mesh.spherical import spherical_triangle_areas
+    calls, faces = [], []
+
+    def spy(y, JD, q, normals, *args, **kw):
+        calls.append((JD, kw.get("sample_weight"), normals is not None))
+        return position_normal_loss(y, JD, q, normals, *args, **kw)
+
+    points = targets_module._MeshTarget._points
+
+    def spy_points(self, face, beta):
+        faces.append(np.array(face))
+        return points(self, face, beta)
+
+    monkeypatch.setattr(fit_module, "position_normal_loss", spy)
+    monkeypatch.setattr(targets_module._MeshTarget, "_points", spy_points)
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(3)
+    Vs = V / np.linalg.norm(V, axis=1, keepdims=True)      # a radial mesh's embedding
+    A, s = face_areas(V, F), spherical_triangle_areas(Vs, F)
+    density = (A / A.sum()) / (s / s.sum())
+    opts = dict(TINY, batch=64, sampling="area", steps=4, closest_after=0.5)
+    _, r = fit_mesh(V, F, Vs=Vs, **opts)
+    assert r.options["area_weight_max"] == AREA_WEIGHT_MAX == 4.0
+    assert r.options["vertex_fraction"] > 0                 # vertices in the batch too
+    assert "judged over the surface it makes" in r.choices["area_weight_max"]["why"]
+    main = [(JD, sw) for JD, sw, has_normals in calls if has_normals]
+    assert len(main) == len(faces[-4:]) == 4                 # one draw and one call a step
+    for (JD, sw), face in zip(main, faces[-4:]):
+        if sw is None:                                       # before the phase
+            continue
+        # the points on the faces, then the mesh's vertices (its coarse default), counted
+        # at the density 1
+        rho = np.concatenate([density[face], np.ones(len(sw) - len(face))])
+        np.testing.assert_allclose(sw, np.clip(np.linalg.norm(
+            np.cross(JD[:, :, 0], JD[:, :, 1]), axis=1) / rho, 0.25, 4.0), rtol=1e-5)
+    assert [sw is None for _, sw in main] == [True, True, False, False]
+    # the anchor's term takes the same weights as the nearest point's
+    anchors = [sw for JD, sw, has_normals in calls if not has_normals]
+    np.testing.assert_array_equal(anchors[-1], main[-1][1])
+    calls.clear()
+    _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, area_weight_max=0.0))
+    assert "area_weight_max" not in r.choices and r.options["area_weight_max"] == 0.0
+    assert all(sw is None for _, sw, _ in calls)
+    _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, closest_after=1.0))
+    assert r.options["area_weight_max"] == 0.0
+    assert "no nearest-point phase" in r.choices["area_weight_max"]["why"]
+    _, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), steps=2, **TINY)
+    assert r.options["area_weight_max"] == 0.0 and "area_weight_max" not in r.choices
+    for kw, msg in ((dict(area_weight_max=0.5), r"0 \(off\) or a factor >= 1, got 0.5"),
+                    (dict(area_weight_max=-1.0), "area_weight_max must be"),
+                    (dict(area_weight_max=2.0, closest_after=1.0),
+                     "closest_after=1 turns that phase off"),
+                    (dict(area_weight_max=2.0, normal_weight=0.0), "normal_weight=0")):
+        with pytest.raises(ValueError, match=msg):
+            fit_mesh(V, F, Vs="not an embedding", **kw)
+    with pytest.raises(ValueError, match="has no nearest-point phase"):
+        fit_shape(Ellipsoid(1.0, 1.3, 0.7), area_weight_max=2.0, **TINY)
 
 
 @pytest.mark.slow_nojit

@@ -11,10 +11,17 @@ fit_sdf                  fitting to the zero set of a signed distance function (
 
 from ..options import FitOptions
 from .fit import DEFAULTS, FitReport, fit_mesh, fit_sampler, fit_shape
-from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position_normal_loss
+from .losses import (
+    hessian_loss,
+    jacobian_loss,
+    normals_from_tangents,
+    own_area_weights,
+    position_normal_loss,
+)
 from .model import SphericalNeuralSurface
 from .sdf import SDFFitReport, fit_sdf, project_to_zero_set
 
 __all__ = ["SphericalNeuralSurface", "fit_mesh", "fit_shape", "fit_sampler", "FitReport",
            "FitOptions", "DEFAULTS", "position_normal_loss", "jacobian_loss", "hessian_loss",
-           "normals_from_tangents", "fit_sdf", "SDFFitReport", "project_to_zero_set"]
+           "normals_from_tangents", "own_area_weights", "fit_sdf", "SDFFitReport",
+           "project_to_zero_set"]

@@ -11,6 +11,7 @@ from ..geometry import tangent_frame
 from ..nn.mlp import ResidualMLP
 from ..nn.optim import Schedule
 from ..options import (
+    AREA_WEIGHT_MAX,
     AUTO,
     AUTO_EXACT,
     CLOSEST_NORMAL_AREA,
@@ -191,6 +192,23 @@ _DECAY_WHY = {
 WITH_SECOND_MOMENT = ("adam", "soap")
 
 
+def area_weight_conflict(most, closest_after, normal_weight, nearest=True):
+    """The error message when ``area_weight_max`` (``most``) is given but cannot act: it
+    weights a mesh's nearest-point phase (``nearest``: the target has one) and needs the
+    normals' derivatives; else None. ``closest_after`` and ``normal_weight`` may be None
+    (auto)."""
+    if not most:
+        return None
+    why = ("this target has no nearest-point phase (a mesh's, fit_mesh)" if not nearest
+           else "closest_after=1 turns that phase off" if closest_after == 1.0
+           else "normal_weight=0 computes no derivatives to measure the surface's area by"
+           if normal_weight == 0.0 else None)
+    if why is None:
+        return None
+    return (f"area_weight_max={most:g} weights the points of a mesh's nearest-point phase by "
+            f"the fitted surface's own area, but {why}: use 0")
+
+
 def second_moment_conflict(optimizer, decay):
     """The error message when ``decay`` (``second_moment_decay``) is given to an optimiser
     without a second moment, else None."""
@@ -339,9 +357,24 @@ def _plan(target, o, net, elapsed=0.0):
         if o[name] is None:
             o[name] = auto[param]
             choices[name] = {"value": o[name], "why": why[param]}
-    conflict = second_moment_conflict(o["optimizer"], o["second_moment_decay"])
+    phase = nearest and o["closest_after"] < 1.0
+    conflict = (second_moment_conflict(o["optimizer"], o["second_moment_decay"])
+                or area_weight_conflict(o["area_weight_max"], o["closest_after"],
+                                        o["normal_weight"], nearest))
     if conflict:
         raise ValueError(conflict)
+    if o["area_weight_max"] is None:
+        on = phase and o["normal_weight"] > 0
+        o["area_weight_max"] = AREA_WEIGHT_MAX if on else 0.0
+        if nearest:         # a mesh: recorded either way (an analytic map has no phase)
+            choices["area_weight_max"] = {
+                "value": o["area_weight_max"],
+                "why": f"the nearest-point phase weighs each point by the fitted surface's "
+                       f"area element over the embedding's, within a factor "
+                       f"{AREA_WEIGHT_MAX:g}: the fit is judged over the surface it makes"
+                       if on else "no nearest-point phase: the embedding's measure"
+                       if not phase else "normal_weight 0: no derivatives to measure the "
+                                         "surface's area by"}
     if o["second_moment_decay"] is None and o["optimizer"] == "soap":
         o["second_moment_decay"] = SECOND_MOMENT_DECAY[param]
         choices["second_moment_decay"] = {"value": o["second_moment_decay"],

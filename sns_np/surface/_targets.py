@@ -55,6 +55,7 @@ class _MeshTarget:
             self.fingerprint += f":{smooth}:creases={self.crease_angle}"
         self.smooth = smooth
         self._nearest = None            # the ClosestPoint search, built on first use
+        self.last_faces = None          # the faces of the last points drawn on the faces
 
     @cached_property
     def phong_gap(self):
@@ -94,8 +95,18 @@ class _MeshTarget:
         return (self.corr.Vs[i], (self.corr.V[i] - self.center) / self.scale,
                 self.corr.N_target[i])
 
+    @cached_property
+    def sphere_density(self):
+        """Each face's share of the surface's area over its share of the sphere's: the area
+        element of the embedding's map in normalised units (total area 4 pi), ``(m,)``."""
+        from ..mesh.spherical import spherical_triangle_areas
+        sphere = spherical_triangle_areas(self.corr.Vs, self.corr.F)
+        return (self.face_area / self.area) / (sphere / sphere.sum())
+
     def _points(self, face, beta):
-        """``(p, q, normals)`` of the points ``beta`` of faces ``face``."""
+        """``(p, q, normals)`` of the points ``beta`` of faces ``face`` (kept as
+        ``last_faces``, for the fit's area weights)."""
+        self.last_faces = face
         return (self.corr.to_sphere(face, beta), *self._targets(face, beta))
 
     def evaluate_at(self, p):

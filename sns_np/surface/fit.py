@@ -60,13 +60,20 @@ from ._plan import (
     _plan,
     _probe_step_time,
     _schedule,
+    area_weight_conflict,
     detail,
     readout_errors,
     second_moment_conflict,
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
 from ._targets import _MeshTarget, _ShapeTarget
-from .losses import hessian_loss, jacobian_loss, normals_from_tangents, position_normal_loss
+from .losses import (
+    hessian_loss,
+    jacobian_loss,
+    normals_from_tangents,
+    own_area_weights,
+    position_normal_loss,
+)
 from .model import SphericalNeuralSurface
 
 __all__ = ["FitReport", "FitOptions", "fit_mesh", "fit_shape", "fit_sampler", "detail",
@@ -465,6 +472,17 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         are guesses that no surface through its vertices follows.
     anchor_weight : float
         The weight of the nearest-point phase's anchor to the correspondence (1).
+    area_weight_max : float, 0 or >= 1
+        A mesh's nearest-point phase only: each training point's terms are weighted by the
+        fitted surface's area element over the embedding's at that point, clipped to
+        ``[1 / area_weight_max, area_weight_max]`` and held constant in the gradient
+        (:func:`~sns_np.surface.losses.own_area_weights`). The points are drawn by the mesh's
+        area through the embedding, but the fit is judged over the surface it makes; where
+        the network stretches a patch of the sphere over more surface than the embedding
+        does, that surface gets its share back. 0: the embedding's measure throughout.
+        Default: ``options.AREA_WEIGHT_MAX`` (4) when the phase runs, else 0. It needs the
+        normals' derivatives, so ``normal_weight`` 0 takes 0. docs/fitting.md, "The
+        surface's own area".
     readout_every : int
         Refit the output layer every this many steps (0: never) by ``readout="gn"``
         (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
@@ -580,6 +598,7 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         order = 2 if wh else 1 if (w or wj) else 0
         if closest:
             target.nearest()        # built here, not by the engine's threads at once
+        area_most = o["area_weight_max"] if closest else 0.0
         ema_pos = ema_nrm = None
         stopped = "step budget"
         step = start
@@ -610,6 +629,12 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     else:
                         p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
+                    # the embedding's area element at each point; a vertex has none of its
+                    # own and counts at the mean, 1
+                    density = None
+                    if area_most:
+                        density = np.ones(len(p), dtype=t_dtype)
+                        density[:n_faces] = target.sphere_density[target.last_faces]
                     errors = None if sampler is None else np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     if wh:      # [e_u, e_v, p]: second derivatives along e_u, e_v and J p
@@ -624,6 +649,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
 
                     def loss_fn(y, JD, sl):
                         sw = None if wc is None else wc[sl]
+                        if near and density is not None and JD is not None:
+                            aw = own_area_weights(JD, density[sl], area_most)
+                            sw = aw if sw is None else sw * aw
                         if near:    # the targets at the mesh points nearest y, anchored
                             qn, nn = (a.astype(t_dtype) for a in target.closest(y))
                             val, dy, dJD, pr = position_normal_loss(
@@ -817,7 +845,8 @@ def _optimizer_options(o, net):
 def _check_early(options):
     """Refuse unknown or contradictory options before any work (embedding, fitting) starts."""
     o, rest = FitOptions.split(options, extra=_PASSED)
-    conflict = second_moment_conflict(o.optimizer, o.second_moment_decay)
+    conflict = (second_moment_conflict(o.optimizer, o.second_moment_decay)
+                or area_weight_conflict(o.area_weight_max, o.closest_after, o.normal_weight))
     if conflict:
         raise ValueError(conflict)
     _check_checkpoint_options(rest.get("checkpoint"),

@@ -25,6 +25,13 @@ which is s for s << d^2 and grows like 2 d |n - n_i| beyond: errors larger than 
 by their size, not its square, so a few points with large errors no longer steer the fit
 (the fit is judged by the mean angle). dL/dn is then scaled by rho'(s) per point.
 
+Weights by the fitted surface's own area (a mesh's nearest-point phase, ``area_weight_max``):
+training points are drawn by the mesh's area through the embedding, whose map has the area
+element ``rho`` (per face: its share of the surface's area over its share of the sphere's),
+while the fit is judged over the surface it makes, whose area element is ``|S_u x S_v|``.
+Each point's terms are weighted by ``clip(|S_u x S_v| / rho, 1 / m, m)``, held constant in
+the gradient (a weight that the fit could lower by shrinking a patch would reward it).
+
 Jacobian loss (an analytic map, whose derivatives along the sphere are exact data):
 
     loss = mu 1/N sum |JD_i - T_i|^2_F,     dL/dJD = 2 mu (JD - T) / N
@@ -44,7 +51,8 @@ import numpy as np
 # the one normal function (geometry owns it); re-exported here and from sns_np.surface
 from ..geometry.forms import normals_from_tangents, sphere_second_derivatives
 
-__all__ = ["hessian_loss", "jacobian_loss", "normals_from_tangents", "position_normal_loss"]
+__all__ = ["hessian_loss", "jacobian_loss", "normals_from_tangents", "own_area_weights",
+           "position_normal_loss"]
 
 
 def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1.0,
@@ -144,6 +152,35 @@ def position_normal_loss(y, JD, q, normals, n_total, normal_weight=1e-4, scale=1
     dJD[:, :, 0] = np.cross(Sv, g)
     dJD[:, :, 1] = np.cross(g, Su)
     return loss, dy, dJD, parts
+
+
+def own_area_weights(JD, density, most):
+    """Per-point weights that carry the embedding's measure over to the fitted surface's own:
+    the map's area element over the embedding's, clipped to ``[1 / most, most]``.
+
+    Parameters
+    ----------
+    JD : (c, 3, 2) float array, the map's derivatives along an orthonormal tangent frame
+        of the sphere (in the units of the targets, as in :func:`position_normal_loss`)
+    density : (c,) float array, the embedding's area element at each point (> 0)
+    most : float >= 1, the largest factor either way
+
+    Returns
+    -------
+    w : (c,) array of JD's dtype, in ``[1 / most, most]``
+
+    Examples
+    --------
+    >>> JD = np.array([[[2.0, 0.0], [0.0, 3.0], [0.0, 0.0]]] * 3)  # area element 6
+    >>> own_area_weights(JD, np.array([6.0, 1.0, 60.0]), 4.0).tolist()
+    [1.0, 4.0, 0.25]
+    """
+    most = float(most)
+    if not most >= 1.0:
+        raise ValueError(f"most must be a factor >= 1, got {most!r}")
+    area = np.linalg.norm(np.cross(JD[:, :, 0], JD[:, :, 1]), axis=1)
+    return np.clip(area / np.asarray(density, dtype=area.dtype), 1.0 / most,
+                   most).astype(JD.dtype, copy=False)
 
 
 def jacobian_loss(JD, JT, n_total, weight=1.0, sample_weight=None):
