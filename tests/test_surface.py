@@ -434,6 +434,11 @@ def test_own_area_weights_match_an_ellipsoids_area_element():
     assert 0 < (w == 4.0).sum() < len(p) and 0 < (w == 0.25).sum() < len(p)   # both clips
     assert own_area_weights(JD.astype(np.float32), density, 2.0).dtype == np.float32
     np.testing.assert_array_equal(own_area_weights(JD, density, 1.0), 1.0)
+    # a degenerate face (density 0) takes the upper bound, with no area either 1, quietly
+    JD0 = JD[:2].copy()
+    JD0[1] = 0.0
+    with np.errstate(all="raise"):
+        np.testing.assert_array_equal(own_area_weights(JD0, np.zeros(2), 4.0), [4.0, 1.0])
     with pytest.raises(ValueError, match="most must be a factor >= 1, got 0.5"):
         own_area_weights(JD, density, 0.5)
 

@@ -179,8 +179,10 @@ def own_area_weights(JD, density, most):
     if not most >= 1.0:
         raise ValueError(f"most must be a factor >= 1, got {most!r}")
     area = np.linalg.norm(np.cross(JD[:, :, 0], JD[:, :, 1]), axis=1)
-    return np.clip(area / np.asarray(density, dtype=area.dtype), 1.0 / most,
-                   most).astype(JD.dtype, copy=False)
+    with np.errstate(divide="ignore", invalid="ignore"):    # a degenerate face: a bound or 1
+        ratio = area / np.asarray(density, dtype=area.dtype)
+    return np.clip(np.nan_to_num(ratio, nan=1.0), 1.0 / most, most).astype(JD.dtype,
+                                                                          copy=False)
 
 
 def jacobian_loss(JD, JT, n_total, weight=1.0, sample_weight=None):
