@@ -598,7 +598,6 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         order = 2 if wh else 1 if (w or wj) else 0
         if closest:
             target.nearest()        # built here, not by the engine's threads at once
-        area_most = o["area_weight_max"] if closest else 0.0
         ema_pos = ema_nrm = None
         stopped = "step budget"
         step = start
@@ -629,12 +628,6 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     else:
                         p, q, nt, wts = _draw(target, sampler, n_faces, n_vertices, rng)
                     wc = None if wts is None else wts.astype(t_dtype)
-                    # the embedding's area element at each point; a vertex has none of its
-                    # own and counts at the mean, 1
-                    density = None
-                    if area_most:
-                        density = np.ones(len(p), dtype=t_dtype)
-                        density[:n_faces] = target.sphere_density[target.last_faces]
                     errors = None if sampler is None else np.empty(len(p))
                     R = tangent_frame(p) if order else None
                     if wh:      # [e_u, e_v, p]: second derivatives along e_u, e_v and J p
@@ -646,11 +639,18 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
                     STc = ST.astype(t_dtype) if wh else None
 
                     near = closest and _fraction_done(step, total, t0, o) >= o["closest_after"]
+                    # the embedding's area element at each point of the phase (the plan left
+                    # area_weight_max 0 without one); a vertex has none of its own and counts
+                    # at the mean, 1
+                    density = None
+                    if near and o["area_weight_max"]:
+                        density = np.ones(len(p), dtype=t_dtype)
+                        density[:n_faces] = target.sphere_density[target.last_faces]
 
                     def loss_fn(y, JD, sl):
                         sw = None if wc is None else wc[sl]
-                        if near and density is not None and JD is not None:
-                            aw = own_area_weights(JD, density[sl], area_most)
+                        if density is not None and JD is not None:
+                            aw = own_area_weights(JD, density[sl], o["area_weight_max"])
                             sw = aw if sw is None else sw * aw
                         if near:    # the targets at the mesh points nearest y, anchored
                             qn, nn = (a.astype(t_dtype) for a in target.closest(y))
