@@ -344,7 +344,10 @@ CLOSEST_NORMAL_MAX = 0.1
 #: Stein's sword (held out), 540 s, one thread, two fits at once: 7% of its surface lay where
 #: the network's area element was over 4 times the mean, with 8.3 degrees of normal error
 #: there (35% of the total); weighted, that share fell to 3% at 1.6 degrees, and the mean from
-#: 1.60 to 1.15 degrees (docs/fitting.md, "The surface's own area")
+#: 1.60 to 1.15 degrees (docs/fitting.md, "The surface's own area"). Not on a coarse mesh,
+#: whose interpolated normals are guesses: there the weights followed those normals at the
+#: positions' cost (BOBBLE's level-5 mesh, two pairs: distance 6% worse, exact H 2-4% worse;
+#: armadillo1200: distance 4% worse)
 AREA_WEIGHT_MAX = 4.0
 
 #: the weight of the Jacobian loss (the derivatives along the sphere, ``losses.jacobian_loss``)
@@ -542,7 +545,8 @@ class FitOptions(Options):
     area_weight_max: float | None = option(
         None, f"in a mesh's nearest-point phase, weight each point by the fitted surface's "
         f"area element over the embedding's, clipped to [1/this, this] (0: the embedding's "
-        f"measure; default: {AREA_WEIGHT_MAX:g} when the phase runs, else 0)", AreaFactor(),
+        f"measure; default: {AREA_WEIGHT_MAX:g} when the phase runs on a fine mesh, else 0)",
+        AreaFactor(),
         resume=True)
     readout_every: int = option(0, "refit the output layer every this many steps (0: never)",
                                 Int(0), resume=True)

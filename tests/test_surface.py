@@ -447,7 +447,8 @@ def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
     """In the phase each point's terms are weighted by the network's area element over the
     embedding's (measured here from the mesh and its embedding, not from the target), before
     it not at all; "auto" takes AREA_WEIGHT_MAX when the phase runs and 0 otherwise, and
-    records why; weights that cannot act are refused before the embedding runs."""
+    records why (0 on a coarse mesh); weights that cannot act are refused before the
+    embedding runs."""
     import sns_np.surface._targets as targets_module
     import sns_np.surface.fit as fit_module
     from sns_np.mesh import face_areas
@@ -471,10 +472,9 @@ def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
     A, s = face_areas(V, F), spherical_triangle_areas(Vs, F)
     density = (A / A.sum()) / (s / s.sum())
     opts = dict(TINY, batch=64, sampling="area", steps=4, closest_after=0.5)
-    _, r = fit_mesh(V, F, Vs=Vs, **opts)
+    _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, area_weight_max=AREA_WEIGHT_MAX))
     assert r.options["area_weight_max"] == AREA_WEIGHT_MAX == 4.0
-    assert r.options["vertex_fraction"] > 0                 # vertices in the batch too
-    assert "judged over the surface it makes" in r.choices["area_weight_max"]["why"]
+    assert r.options["vertex_fraction"] > 0                 # a coarse mesh: vertices too
     main = [(JD, sw) for JD, sw, has_normals in calls if has_normals]
     assert len(main) == len(faces[-4:]) == 4                 # one draw and one call a step
     for (JD, sw), face in zip(main, faces[-4:]):
@@ -489,6 +489,15 @@ def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
     # the anchor's term takes the same weights as the nearest point's
     anchors = [sw for JD, sw, has_normals in calls if not has_normals]
     np.testing.assert_array_equal(anchors[-1], main[-1][1])
+    # "auto": the weights on a fine mesh, none on a coarse one (its normals are guesses)
+    _, r = fit_mesh(V, F, Vs=Vs, **opts)
+    assert r.options["area_weight_max"] == 0.0
+    assert "a coarse mesh" in r.choices["area_weight_max"]["why"]
+    V4, F4 = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
+    _, r = fit_mesh(V4, F4, Vs=V4 / np.linalg.norm(V4, axis=1, keepdims=True), **opts)
+    assert r.options["vertex_fraction"] == 0.0              # a fine mesh
+    assert r.options["area_weight_max"] == AREA_WEIGHT_MAX
+    assert "judged over the surface it makes" in r.choices["area_weight_max"]["why"]
     calls.clear()
     _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, area_weight_max=0.0))
     assert "area_weight_max" not in r.choices and r.options["area_weight_max"] == 0.0

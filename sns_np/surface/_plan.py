@@ -364,7 +364,8 @@ def _plan(target, o, net, elapsed=0.0):
     if conflict:
         raise ValueError(conflict)
     if o["area_weight_max"] is None:
-        on = phase and o["normal_weight"] > 0
+        coarse, kind = _coarse(target) if nearest else (False, None)
+        on = phase and o["normal_weight"] > 0 and not coarse
         o["area_weight_max"] = AREA_WEIGHT_MAX if on else 0.0
         if nearest:         # a mesh: recorded either way (an analytic map has no phase)
             choices["area_weight_max"] = {
@@ -374,7 +375,10 @@ def _plan(target, o, net, elapsed=0.0):
                        f"{AREA_WEIGHT_MAX:g}: the fit is judged over the surface it makes"
                        if on else "no nearest-point phase: the embedding's measure"
                        if not phase else "normal_weight 0: no derivatives to measure the "
-                                         "surface's area by"}
+                                         "surface's area by"
+                       if o["normal_weight"] == 0 else
+                       f"{kind}: the weights follow its guessed normals at its positions' "
+                       f"cost; the embedding's measure"}
     if o["second_moment_decay"] is None and o["optimizer"] == "soap":
         o["second_moment_decay"] = SECOND_MOMENT_DECAY[param]
         choices["second_moment_decay"] = {"value": o["second_moment_decay"],

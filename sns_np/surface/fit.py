@@ -480,9 +480,11 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         area through the embedding, but the fit is judged over the surface it makes; where
         the network stretches a patch of the sphere over more surface than the embedding
         does, that surface gets its share back. 0: the embedding's measure throughout.
-        Default: ``options.AREA_WEIGHT_MAX`` (4) when the phase runs, else 0. It needs the
-        normals' derivatives, so ``normal_weight`` 0 takes 0. docs/fitting.md, "The
-        surface's own area".
+        Default: ``options.AREA_WEIGHT_MAX`` (4) when the phase runs on a fine mesh, else 0
+        (a coarse mesh keeps the embedding's measure: its interpolated normals are guesses,
+        and the weights followed them at the positions' cost). It needs the normals'
+        derivatives, so ``normal_weight`` 0 takes 0. docs/fitting.md, "The surface's own
+        area".
     readout_every : int
         Refit the output layer every this many steps (0: never) by ``readout="gn"``
         (Levenberg-Marquardt on the full position + normal loss) or ``"ridge"`` (least
