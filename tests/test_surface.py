@@ -490,9 +490,11 @@ def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
     anchors = [sw for JD, sw, has_normals in calls if not has_normals]
     np.testing.assert_array_equal(anchors[-1], main[-1][1])
     # "auto": the weights on a fine mesh, none on a coarse one (its normals are guesses)
+    calls.clear()
     _, r = fit_mesh(V, F, Vs=Vs, **opts)
     assert r.options["area_weight_max"] == 0.0
     assert "a coarse mesh" in r.choices["area_weight_max"]["why"]
+    assert calls and all(sw is None for _, sw, _ in calls)
     V4, F4 = Ellipsoid(1.0, 1.3, 0.7).mesh(4)
     _, r = fit_mesh(V4, F4, Vs=V4 / np.linalg.norm(V4, axis=1, keepdims=True), **opts)
     assert r.options["vertex_fraction"] == 0.0              # a fine mesh
