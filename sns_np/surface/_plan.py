@@ -364,21 +364,20 @@ def _plan(target, o, net, elapsed=0.0):
     if conflict:
         raise ValueError(conflict)
     if o["area_weight_max"] is None:
-        coarse, kind = _coarse(target) if nearest else (False, None)
-        on = phase and o["normal_weight"] > 0 and not coarse
-        o["area_weight_max"] = AREA_WEIGHT_MAX if on else 0.0
+        coarse, kind = _coarse(target)
+        off = ("no nearest-point phase: the embedding's measure" if not phase
+               else "normal_weight 0: no derivatives to measure the surface's area by"
+               if not o["normal_weight"] > 0
+               else f"{kind}: the weights follow its guessed normals at its positions' "
+                    f"cost; the embedding's measure" if coarse else None)
+        o["area_weight_max"] = 0.0 if off else AREA_WEIGHT_MAX
         if nearest:         # a mesh: recorded either way (an analytic map has no phase)
             choices["area_weight_max"] = {
                 "value": o["area_weight_max"],
-                "why": f"the nearest-point phase weighs each point by the fitted surface's "
-                       f"area element over the embedding's, within a factor "
-                       f"{AREA_WEIGHT_MAX:g}: the fit is judged over the surface it makes"
-                       if on else "no nearest-point phase: the embedding's measure"
-                       if not phase else "normal_weight 0: no derivatives to measure the "
-                                         "surface's area by"
-                       if o["normal_weight"] == 0 else
-                       f"{kind}: the weights follow its guessed normals at its positions' "
-                       f"cost; the embedding's measure"}
+                "why": off or f"the nearest-point phase weighs each point by the fitted "
+                              f"surface's area element over the embedding's, within a factor "
+                              f"{AREA_WEIGHT_MAX:g}: the fit is judged over the surface it "
+                              f"makes"}
     if o["second_moment_decay"] is None and o["optimizer"] == "soap":
         o["second_moment_decay"] = SECOND_MOMENT_DECAY[param]
         choices["second_moment_decay"] = {"value": o["second_moment_decay"],
