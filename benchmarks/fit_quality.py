@@ -41,16 +41,16 @@ Cases:
   parametrisation is the shape's own), the kinder measure: it does not see a surface shifted
   along itself.
 
-Every fitted case also prints ``rough``, the roughness of its mean curvature (``models``
-below): on a mesh of a smooth surface it is the truth's (SPIKE at level 5: 0.010), on a
-detailed mesh it grows as a longer fit copies the facets (docs/fitting.md, "The curvature's
-roughness").
-
 * ``cube``, ``jack``, ``cylinder`` (``cad_shapes.py``): meshes with sharp edges and flat
   faces, built here, measured against the mesh as above and, more than 0.1 from their edges,
   against their closed form: ``exact_nrm`` the normal angle, ``flat_H`` the mean |H - H_true|
   (0 on the flat parts, 1/(2 R) on the cylinder's side) times the radius of the sphere of the
   same area (a sphere's H would read 1).
+
+Every fitted case also prints ``rough``, the roughness of its mean curvature (``models``
+below): on a mesh of a smooth surface it is the truth's (SPIKE at level 5: 0.010), on a
+detailed mesh it grows as a longer fit copies the facets (docs/fitting.md, "The curvature's
+roughness").
 
 ``loop``: no fit; the mesh's Loop subdivision surface (two levels, libigl) on the same
 measures (``dist``, ``nrm``): what a classical smooth surface near the mesh reaches against
