@@ -244,6 +244,20 @@ def _vertex_fraction(target):
     return 0.0, f"{kind}: its faces only"
 
 
+def _area_weights_off(target, phase, normal_weight):
+    """Why "auto" leaves the surface's own area weights off (the embedding's measure), or
+    None when they go on."""
+    if not phase:
+        return "no nearest-point phase: the embedding's measure"
+    if not normal_weight > 0:
+        return "normal_weight 0: no derivatives to measure the surface's area by"
+    coarse, kind = _coarse(target)
+    if coarse:
+        return (f"{kind}: the weights follow its guessed normals at its positions' cost; "
+                f"the embedding's measure")
+    return None
+
+
 def _plan(target, o, net, elapsed=0.0):
     """Fill the options left to "auto" (None) from the target's detail; returns the choices
     made (option -> {"value", "why"})."""
@@ -272,7 +286,7 @@ def _plan(target, o, net, elapsed=0.0):
             "parametrisation" if nearest else "no mesh: the targets are the map's own"}
     if o["closest_normal_weight"] is None:
         a = getattr(target, "mean_face_area", None)
-        coarse, kind = _coarse(target) if nearest else (False, None)
+        coarse, kind = _coarse(target)
         if coarse:
             o["closest_normal_weight"] = COARSE_CLOSEST_NORMAL
             choices["closest_normal_weight"] = {
@@ -364,12 +378,7 @@ def _plan(target, o, net, elapsed=0.0):
     if conflict:
         raise ValueError(conflict)
     if o["area_weight_max"] is None:
-        coarse, kind = _coarse(target)
-        off = ("no nearest-point phase: the embedding's measure" if not phase
-               else "normal_weight 0: no derivatives to measure the surface's area by"
-               if not o["normal_weight"] > 0
-               else f"{kind}: the weights follow its guessed normals at its positions' "
-                    f"cost; the embedding's measure" if coarse else None)
+        off = _area_weights_off(target, phase, o["normal_weight"])
         o["area_weight_max"] = 0.0 if off else AREA_WEIGHT_MAX
         if nearest:         # a mesh: recorded either way (an analytic map has no phase)
             choices["area_weight_max"] = {
