@@ -8,7 +8,7 @@ Run::
     python benchmarks/fit_quality.py dtype --steps 150       # float32 vs float64 training
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
     python benchmarks/fit_quality.py detail                  # the detail measures of each case
-    python benchmarks/fit_quality.py loop spot max           # a Loop surface on the same measures
+    python benchmarks/fit_quality.py loop spot max           # smooth surfaces near the mesh, scored
     python benchmarks/fit_quality.py models A.npz flower=B.npz  # saved fits: roughness, drift
     python benchmarks/fit_quality.py path/to/mesh.obj        # any closed genus-0 mesh file
 
