@@ -95,7 +95,7 @@ from sns_np.mesh import (  # noqa: E402
     sample_surface,
     spherical_embedding,
 )
-from sns_np.mesh.operators import vertex_normals  # noqa: E402
+from sns_np.mesh.operators import face_normals, vertex_normals  # noqa: E402
 from sns_np.options import check_creases  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
 from sns_np.sampling import uniform_sphere  # noqa: E402
@@ -250,7 +250,8 @@ def normal_following(V, F, levels=3):
     part of n along the face (to first order in h); that has no exact solution (n is not
     the normal field of any surface), so h is the least-squares one, piecewise linear on the
     subdivision: ``(G' A G + eps M) h = -G' A t`` with libigl's gradient G, the faces' areas
-    A and a small multiple of the mass matrix M that only fixes the mean of h (near 0)."""
+    A and a small multiple of the (barycentric) mass matrix M that only fixes the mean of h
+    (near 0)."""
     import igl
     from scipy.sparse import diags
     from scipy.sparse.linalg import spsolve
@@ -258,14 +259,13 @@ def normal_following(V, F, levels=3):
     VN, F2 = igl.upsample(np.hstack([V, vertex_normals(V, F, weighting="angle")]), F, levels)
     V2, N2 = VN[:, :3], VN[:, 3:]           # the normals interpolated linearly, not yet unit
     G = igl.grad(V2, F2)
-    A = diags(np.tile(igl.doublearea(V2, F2) / 2, 3))
-    nf = np.cross(V2[F2[:, 1]] - V2[F2[:, 0]], V2[F2[:, 2]] - V2[F2[:, 0]])
-    nf /= np.linalg.norm(nf, axis=1, keepdims=True)
+    A = diags(np.tile(face_areas(V2, F2), 3))
+    nf = face_normals(V2, F2)
     nc = N2[F2].mean(axis=1)
     nc /= np.linalg.norm(nc, axis=1, keepdims=True)
     t = nc - np.einsum("ij,ij->i", nc, nf)[:, None] * nf
     L = (G.T @ A @ G).tocsc()
-    M = igl.massmatrix(V2, F2, igl.MASSMATRIX_TYPE_VORONOI)
+    M = mass_matrix(V2, F2)
     eps = 1e-6 * L.diagonal().mean() / M.diagonal().mean()
     h = spsolve((L + eps * M).tocsc(), -(G.T @ (A @ t.T.ravel())))
     return V2 + h[:, None] * N2 / np.linalg.norm(N2, axis=1, keepdims=True), F2
