@@ -536,7 +536,8 @@ class FitOptions(Options):
         None, f"weight of the normal loss while targets are the nearest mesh points "
         f"(default: {CLOSEST_NORMAL_AREA:g} x the mean face area in normalised units, at most "
         f"{CLOSEST_NORMAL_MAX:g}: a finer mesh leans more on its positions; "
-        f"{COARSE_CLOSEST_NORMAL:g} on a coarse mesh, whose interpolated normals are guesses)",
+        f"{COARSE_CLOSEST_NORMAL:g} on a coarse mesh, whose interpolated normals are guesses; "
+        f"0 with normal_weight 0, which computes no derivatives)",
         Real(allow_zero=True), resume=True)
     anchor_weight: float = option(
         1.0, "weight of the correspondence's position error while targets are the nearest "

@@ -507,6 +507,11 @@ def test_area_weight_max_weights_the_nearest_point_phase(monkeypatch):
     _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, closest_after=1.0))
     assert r.options["area_weight_max"] == 0.0
     assert "no nearest-point phase" in r.choices["area_weight_max"]["why"]
+    # a fine mesh without the normal term: no derivatives to weigh the surface's area by
+    _, r = fit_mesh(V4, F4, Vs=V4 / np.linalg.norm(V4, axis=1, keepdims=True),
+                    **dict(opts, normal_weight=0.0))
+    assert r.options["area_weight_max"] == 0.0
+    assert "normal_weight 0" in r.choices["area_weight_max"]["why"]
     _, r = fit_shape(Ellipsoid(1.0, 1.3, 0.7), steps=2, **TINY)
     assert r.options["area_weight_max"] == 0.0 and "area_weight_max" not in r.choices
     for kw, msg in ((dict(area_weight_max=0.5), r"0 \(off\) or a factor >= 1, got 0.5"),
@@ -874,6 +879,27 @@ def test_closest_normal_weight_follows_the_mean_face_area():
     _, r = fit_mesh(V, F, Vs=Vs, steps=1, closest_normal_weight=0.5, **TINY)
     assert r.options["closest_normal_weight"] == 0.5
     assert "closest_normal_weight" not in r.choices              # given, not chosen
+
+
+def test_a_mesh_fit_without_normals_has_none_in_its_nearest_point_phase():
+    """normal_weight=0 computes no derivatives: "auto" gives the phase no normal term either
+    (it crashed on the missing Jacobian), and a normal weight given for the phase is refused
+    before the embedding runs."""
+    V, F = Ellipsoid(1.0, 1.3, 0.7).mesh(3)
+    Vs = V / np.linalg.norm(V, axis=1, keepdims=True)
+    opts = dict(TINY, batch=64, sampling="area", steps=4, closest_after=0.5, normal_weight=0.0)
+    S, r = fit_mesh(V, F, Vs=Vs, **opts)
+    assert r.options["closest_normal_weight"] == 0.0
+    assert "normal_weight 0" in r.choices["closest_normal_weight"]["why"]
+    assert np.isfinite(S(Vs[:10])).all()
+    for given in (0.1, 1e-3):
+        with pytest.raises(ValueError, match=f"closest_normal_weight={given:g} weights the "
+                                             f"normal term.*normal_weight=0"):
+            fit_mesh(V, F, Vs="not an embedding", **dict(opts, closest_normal_weight=given))
+    _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, closest_normal_weight=0.0))   # consistent
+    assert r.options["closest_normal_weight"] == 0.0 and "closest_normal_weight" not in r.choices
+    _, r = fit_mesh(V, F, Vs=Vs, **dict(opts, closest_after=1.0, closest_normal_weight=0.1))
+    assert r.options["closest_normal_weight"] == 0.1             # no phase: nothing to refuse
 
 
 class _Bulged:

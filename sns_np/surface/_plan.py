@@ -209,6 +209,18 @@ def area_weight_conflict(most, closest_after, normal_weight, nearest=True):
             f"the fitted surface's own area, but {why}: use 0")
 
 
+def closest_normal_conflict(weight, closest_after, normal_weight):
+    """The error message when ``closest_normal_weight`` (``weight``) is given above 0 for a
+    nearest-point phase that may run while ``normal_weight`` is 0: the fit then computes no
+    derivatives, so the phase has no normals to compare; else None. ``closest_after`` and
+    ``normal_weight`` may be None (auto)."""
+    if not weight or closest_after == 1.0 or normal_weight != 0.0:
+        return None
+    return (f"closest_normal_weight={weight:g} weights the normal term of a mesh's "
+            f"nearest-point phase, but normal_weight=0 computes no derivatives for it: use "
+            f"closest_normal_weight=0, or a normal_weight above 0")
+
+
 def second_moment_conflict(optimizer, decay):
     """The error message when ``decay`` (``second_moment_decay``) is given to an optimiser
     without a second moment, else None."""
@@ -287,7 +299,13 @@ def _plan(target, o, net, elapsed=0.0):
     if o["closest_normal_weight"] is None:
         a = getattr(target, "mean_face_area", None)
         coarse, kind = _coarse(target)
-        if coarse:
+        if o["normal_weight"] == 0.0:
+            o["closest_normal_weight"] = 0.0
+            if nearest:
+                choices["closest_normal_weight"] = {
+                    "value": 0.0, "why": "normal_weight 0: no derivatives, so no normal term "
+                                         "in the nearest-point phase either"}
+        elif coarse:
             o["closest_normal_weight"] = COARSE_CLOSEST_NORMAL
             choices["closest_normal_weight"] = {
                 "value": COARSE_CLOSEST_NORMAL,
@@ -374,7 +392,9 @@ def _plan(target, o, net, elapsed=0.0):
     phase = nearest and o["closest_after"] < 1.0
     conflict = (second_moment_conflict(o["optimizer"], o["second_moment_decay"])
                 or area_weight_conflict(o["area_weight_max"], o["closest_after"],
-                                        o["normal_weight"], nearest))
+                                        o["normal_weight"], nearest)
+                or (closest_normal_conflict(o["closest_normal_weight"], o["closest_after"],
+                                            o["normal_weight"]) if phase else None))
     if conflict:
         raise ValueError(conflict)
     if o["area_weight_max"] is None:

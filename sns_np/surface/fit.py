@@ -61,6 +61,7 @@ from ._plan import (
     _probe_step_time,
     _schedule,
     area_weight_conflict,
+    closest_normal_conflict,
     detail,
     readout_errors,
     second_moment_conflict,
@@ -283,7 +284,7 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
     """
     check_choice(smooth, "smooth", set(MESH_SMOOTHING))
     check_creases(creases)
-    _check_early(options)
+    _check_early(options, mesh=True)
     for name in DERIVATIVE_WEIGHTS:             # before the embedding, not after it
         if options.get(name):
             raise ValueError(NO_JACOBIAN.format(name, options[name]))
@@ -844,11 +845,14 @@ def _optimizer_options(o, net):
     return out
 
 
-def _check_early(options):
-    """Refuse unknown or contradictory options before any work (embedding, fitting) starts."""
+def _check_early(options, mesh=False):
+    """Refuse unknown or contradictory options before any work (embedding, fitting) starts;
+    ``mesh``: for a mesh's fit, which has a nearest-point phase."""
     o, rest = FitOptions.split(options, extra=_PASSED)
     conflict = (second_moment_conflict(o.optimizer, o.second_moment_decay)
-                or area_weight_conflict(o.area_weight_max, o.closest_after, o.normal_weight))
+                or area_weight_conflict(o.area_weight_max, o.closest_after, o.normal_weight)
+                or (closest_normal_conflict(o.closest_normal_weight, o.closest_after,
+                                            o.normal_weight) if mesh else None))
     if conflict:
         raise ValueError(conflict)
     _check_checkpoint_options(rest.get("checkpoint"),
