@@ -221,6 +221,19 @@ def closest_normal_conflict(weight, closest_after, normal_weight):
             f"closest_normal_weight=0, or a normal_weight above 0")
 
 
+def option_conflict(o, nearest=True, phase=True):
+    """The first contradiction among the options ``o`` (a mapping of option values, "auto"
+    still None), or None: an optimiser's decay without a second moment, area weights that
+    cannot act, a normal weight for a nearest-point phase without derivatives. ``nearest``:
+    the target has nearest points; ``phase``: a nearest-point phase may run. Checked before
+    any work (``fit._check_early``) and again once the automatic choices are made."""
+    return (second_moment_conflict(o["optimizer"], o["second_moment_decay"])
+            or area_weight_conflict(o["area_weight_max"], o["closest_after"],
+                                    o["normal_weight"], nearest)
+            or (closest_normal_conflict(o["closest_normal_weight"], o["closest_after"],
+                                        o["normal_weight"]) if phase else None))
+
+
 def second_moment_conflict(optimizer, decay):
     """The error message when ``decay`` (``second_moment_decay``) is given to an optimiser
     without a second moment, else None."""
@@ -390,11 +403,7 @@ def _plan(target, o, net, elapsed=0.0):
             o[name] = auto[param]
             choices[name] = {"value": o[name], "why": why[param]}
     phase = nearest and o["closest_after"] < 1.0
-    conflict = (second_moment_conflict(o["optimizer"], o["second_moment_decay"])
-                or area_weight_conflict(o["area_weight_max"], o["closest_after"],
-                                        o["normal_weight"], nearest)
-                or (closest_normal_conflict(o["closest_normal_weight"], o["closest_after"],
-                                            o["normal_weight"]) if phase else None))
+    conflict = option_conflict(o, nearest, phase)
     if conflict:
         raise ValueError(conflict)
     if o["area_weight_max"] is None:

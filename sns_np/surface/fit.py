@@ -60,11 +60,9 @@ from ._plan import (
     _plan,
     _probe_step_time,
     _schedule,
-    area_weight_conflict,
-    closest_normal_conflict,
     detail,
+    option_conflict,
     readout_errors,
-    second_moment_conflict,
 )
 from ._readouts import _gauss_newton_readout, _ridge_readout
 from ._targets import _MeshTarget, _ShapeTarget
@@ -849,10 +847,7 @@ def _check_early(options, mesh=False):
     """Refuse unknown or contradictory options before any work (embedding, fitting) starts;
     ``mesh``: for a mesh's fit, which has a nearest-point phase."""
     o, rest = FitOptions.split(options, extra=_PASSED)
-    conflict = (second_moment_conflict(o.optimizer, o.second_moment_decay)
-                or area_weight_conflict(o.area_weight_max, o.closest_after, o.normal_weight)
-                or (closest_normal_conflict(o.closest_normal_weight, o.closest_after,
-                                            o.normal_weight) if mesh else None))
+    conflict = option_conflict(o.to_dict(), phase=mesh)
     if conflict:
         raise ValueError(conflict)
     _check_checkpoint_options(rest.get("checkpoint"),
