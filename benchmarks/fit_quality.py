@@ -56,7 +56,8 @@ roughness").
 measures (``dist``, ``nrm``): what a classical smooth surface near the mesh reaches against
 the mesh's own interpolated normals, the reference for the normal goal. Then a surface made
 to follow those normals (``normal_following``: the mesh's midpoint subdivision, three
-levels, moved along the normals by the least-squares height field whose surface has them),
+levels, moved along the normals by the least-squares height field whose surface has them,
+:class:`sns_np.mesh.NormalHeights`, the fit's default target on a fine mesh at a tie of 1e-3),
 the same measures: how far a surface near the mesh can follow its normals, which are not the
 normals of any one surface; with a tie to the mesh (``TIES``: 1e-6, which only fixes the
 height's mean, then 1e-3 and 1e-2), the best trade between the two measures such surfaces
@@ -97,8 +98,8 @@ from sns_np.mesh import (  # noqa: E402
     sample_surface,
     spherical_embedding,
 )
-from sns_np.mesh.operators import face_normals, vertex_normals  # noqa: E402
-from sns_np.options import check_creases  # noqa: E402
+from sns_np.mesh.operators import vertex_normals  # noqa: E402
+from sns_np.options import MESH_SMOOTHING, check_creases  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
 from sns_np.sampling import uniform_sphere  # noqa: E402
 from sns_np.surface import fit_mesh, fit_shape  # noqa: E402
@@ -247,37 +248,17 @@ def loop_reference(V, F, levels=2, n=20000):
 
 
 def normal_following(V, F, levels=3, ties=(1e-6,)):
-    """The mesh's midpoint subdivision (``levels`` rounds), its vertices moved along the
-    interpolated normals n by the height h whose surface follows n best, one surface per
-    ``tie``: ``([V2 for each tie], F2)``.
-
-    A surface ``q + h n`` over the flat faces has the normal n where ``grad h = -t``, t the
-    part of n along the face (to first order in h); that has no exact solution (n is not
-    the normal field of any surface), so h is the least-squares one, piecewise linear on the
-    subdivision: ``(G' A G + eps M) h = -G' A t`` with libigl's gradient G, the faces' areas
-    A and the (barycentric) mass matrix M, ``eps = tie * mean diag(G' A G) / mean diag(M)``.
-    A tie of 1e-6 only fixes the mean of h (near 0); a larger one ties the surface to the
-    mesh (h = 0), trading its normals for distance: a sweep of ``ties`` traces the best
-    trade between the two measures that such surfaces reach."""
-    import igl
-    from scipy.sparse import diags
-    from scipy.sparse.linalg import spsolve
+    """The surfaces that follow the mesh's interpolated normals, one per ``tie`` (the
+    library's :class:`sns_np.mesh.NormalHeights` on ``levels`` rounds of midpoint
+    subdivision, the fit's "normals" target at its own tie and levels): ``([V2 for each
+    tie], F2)``. A tie of 1e-6 only fixes the mean of the heights (near 0); a larger one ties
+    the surface to the mesh, trading its normals for distance: a sweep of ``ties`` traces the
+    best trade between the two measures that such surfaces reach."""
+    from sns_np.mesh import NormalHeights
     V, F = np.asarray(V, np.float64), np.asarray(F, np.int64)
-    VN, F2 = igl.upsample(np.hstack([V, vertex_normals(V, F, weighting="angle")]), F, levels)
-    V2, N2 = VN[:, :3], VN[:, 3:]           # the normals interpolated linearly, not yet unit
-    G = igl.grad(V2, F2)
-    A = diags(np.tile(face_areas(V2, F2), 3))
-    nf = face_normals(V2, F2)
-    nc = N2[F2].mean(axis=1)
-    nc /= np.linalg.norm(nc, axis=1, keepdims=True)
-    t = nc - np.einsum("ij,ij->i", nc, nf)[:, None] * nf
-    L = (G.T @ A @ G).tocsc()
-    M = mass_matrix(V2, F2)
-    rhs = -(G.T @ (A @ t.T.ravel()))
-    N2 = N2 / np.linalg.norm(N2, axis=1, keepdims=True)
-    ratio = L.diagonal().mean() / M.diagonal().mean()
-    return [V2 + spsolve((L + tie * ratio * M).tocsc(), rhs)[:, None] * N2
-            for tie in ties], F2
+    N = vertex_normals(V, F, weighting="angle")
+    meshes = [NormalHeights(V, F, N, levels=levels, tie=tie).mesh() for tie in ties]
+    return [V2 for V2, _ in meshes], meshes[0][1]
 
 
 def refined_reference(V, F, V2, F2, n=20000):
@@ -604,7 +585,7 @@ def main(argv=None):
                       ("normal-huber", float), ("area-weight-max", float)):
         ap.add_argument(f"--{name}", type=typ)
     ap.add_argument("--dtype", choices=["float32", "float64"])
-    ap.add_argument("--smooth", choices=["phong", "none"])
+    ap.add_argument("--smooth", choices=MESH_SMOOTHING)
     ap.add_argument("--creases", type=lambda t: check_creases(
                         t if t in ("auto", "none") else float(t)),
                     help="auto, none or an angle in degrees (fit_mesh's creases)")

@@ -240,14 +240,11 @@ def fit_many(meshes, out_dir, *, client=None, scheduler=None, workers=None, thre
     reserved = sorted(set(fit_options) & set(_RESERVED))
     if reserved:
         raise TypeError(f"fit_many sets {', '.join(reserved)} itself for every fit")
-    from .._validation import check_choice
-    from ..options import MESH_SMOOTHING, FitOptions, check_creases
+    from ..options import MESH_SMOOTHING, FitOptions, check_smooth
     # unknown names and bad values are refused here, before the cluster starts
     FitOptions.split(fit_options, extra=_RUNTIME + ("smooth", "creases"))
-    if fit_options.get("smooth") is not None:
-        check_choice(fit_options["smooth"], "smooth", set(MESH_SMOOTHING))
-    if fit_options.get("creases") is not None:
-        check_creases(fit_options["creases"])
+    check_smooth(fit_options.get("smooth") or MESH_SMOOTHING[0],
+                 fit_options.get("creases") or "auto")
     threads = int(threads_per_fit)
     if threads < 1:
         raise ValueError(f"threads_per_fit must be >= 1, got {threads_per_fit}")

@@ -30,6 +30,7 @@ from .errors import (
 )
 from .export import write_mesh, written_field_names
 from .foldrepair import FoldRepair
+from .heights import NormalHeights, midpoint_subdivision, subdivided_points
 from .icosphere import icosphere
 from .io import LoadReport, MeshRepairWarning, load
 from .operators import (
@@ -63,6 +64,8 @@ __all__ = [
     "face_areas", "face_normals", "face_angles", "vertex_normals", "corner_normals",
     "normal_turn",
     "cotan_laplacian",
+    # a surface following the vertex normals
+    "NormalHeights", "midpoint_subdivision", "subdivided_points",
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines
     "laplacian_eigenmodes", "eigenvalues", "baseline_curvatures", "discrete_curvatures",

@@ -33,12 +33,19 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        # the mesh's coarseness is measured here for "auto" creases, else on first use (the
-        # automatic vertex_fraction and closest_normal_weight)
-        if crease_angle == "auto":
+        # the mesh's coarseness is measured here for the "auto" choices, else on first use
+        # (the automatic vertex_fraction and closest_normal_weight)
+        if "auto" in (smooth, crease_angle):
             self.phong_gap, self.normal_turn = phong_gap(V, F), mesh.normal_turn(V, F)
-        self.crease_angle, self.crease_why = _crease_choice(
-            crease_angle, self.coarse if crease_angle == "auto" else None)
+        self.smooth, self.smooth_why = _smooth_choice(
+            smooth, crease_angle, self.coarse if smooth == "auto" else None)
+        if self.smooth == "normals" and crease_angle == "auto":
+            self.crease_angle, self.crease_why = None, (
+                "none: the normal-following target follows the vertex normals across every "
+                "edge")
+        else:
+            self.crease_angle, self.crease_why = _crease_choice(
+                crease_angle, self.coarse if crease_angle == "auto" else None)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -51,9 +58,21 @@ class _MeshTarget:
         self.mean_face_area = 4 * np.pi / len(F)     # normalised units (total 4 pi)
         self.bbox_diagonal = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
         self.fingerprint = _fingerprint(V, F)
-        if smooth != "phong" or self.crease_angle is not None:    # other targets, same mesh
-            self.fingerprint += f":{smooth}:creases={self.crease_angle}"
-        self.smooth = smooth
+        self.heights = None
+        if self.smooth == "normals":
+            from ..options import NORMAL_HEIGHT_TIE
+            levels = normal_height_levels(len(V), len(F))
+            self.heights = mesh.NormalHeights(V, F, self.corr.N, levels=levels,
+                                              tie=NORMAL_HEIGHT_TIE)
+            self.smooth_why += (f"; heights on {levels} round(s) of midpoint subdivision "
+                                f"({len(self.heights.h):,} unknowns, tie {NORMAL_HEIGHT_TIE:g}, "
+                                f"solved in {self.heights.seconds:.1f} s)")
+            if verbose:
+                print(f"target: the surface following the mesh's normals, {self.smooth_why}",
+                      flush=True)
+            self.fingerprint += f":normals:tie={NORMAL_HEIGHT_TIE:g}:levels={levels}"
+        if self.smooth not in ("phong", "normals") or self.crease_angle is not None:
+            self.fingerprint += f":{self.smooth}:creases={self.crease_angle}"
         self._nearest = None            # the ClosestPoint search, built on first use
         self.last_faces = None          # the faces of the last points drawn on the faces
 
@@ -77,6 +96,8 @@ class _MeshTarget:
         q, nrm = self.corr.to_mesh(face, beta)
         if self.smooth == "phong":
             q = self.corr.phong_point(face, beta)
+        elif self.smooth == "normals":
+            q = q + self.heights(face, beta)[:, None] * nrm
         return (q - self.center) / self.scale, nrm
 
     def sample(self, n, rng):
@@ -92,8 +113,10 @@ class _MeshTarget:
         where the mesh's positions are exact (between them they are interpolated); the
         normal of a vertex on a crease is that of its first face's side."""
         i = rng.integers(0, len(self.corr.V), n)
-        return (self.corr.Vs[i], (self.corr.V[i] - self.center) / self.scale,
-                self.corr.N_target[i])
+        q = self.corr.V[i]
+        if self.heights is not None:        # the subdivision's first vertices are the mesh's
+            q = q + self.heights.h[i, None] * self.corr.N[i]
+        return self.corr.Vs[i], (q - self.center) / self.scale, self.corr.N_target[i]
 
     @cached_property
     def sphere_density(self):
@@ -204,6 +227,40 @@ class _ShapeTarget:
         nrm, _ = normals_from_tangents(JR[:, :, 0], JR[:, :, 1], degenerate="zero")
         return ((y - self.center) / self.scale, nrm, JR / self.scale,
                 None if S2 is None else S2 / self.scale)
+
+
+def _smooth_choice(smooth, creases, coarse):
+    """The position targets ("normals", "phong" or "none") and why; ``coarse`` (the mesh's
+    :func:`coarseness`) is read for "auto" only."""
+    from ..options import check_smooth
+    smooth, creases = check_smooth(smooth, creases)
+    if smooth != "auto":
+        return smooth, "given"
+    if not isinstance(creases, str):
+        return "phong", (f"phong: a crease angle ({creases:g} deg) is given, and the "
+                         f"normal-following target keeps no creases")
+    is_coarse, why = coarse
+    if is_coarse:
+        return "phong", (f"phong: {why}, whose vertex normals are not followed between its "
+                         f"vertices")
+    return "normals", f"normals: {why}"
+
+
+def normal_height_levels(n_vertices, n_faces):
+    """Rounds of midpoint subdivision of the "normals" target's heights: as many as keep its
+    vertices within ``NORMAL_HEIGHT_UNKNOWNS``, at most ``NORMAL_HEIGHT_LEVELS``. A round
+    adds a vertex per edge (3/2 per face of a closed mesh) and quadruples the faces.
+
+    Examples
+    --------
+    >>> normal_height_levels(2930, 5856), normal_height_levels(21622, 43240)
+    (3, 2)
+    """
+    from ..options import NORMAL_HEIGHT_LEVELS, NORMAL_HEIGHT_UNKNOWNS
+    levels, n, m = 0, n_vertices, n_faces
+    while levels < NORMAL_HEIGHT_LEVELS and n + 3 * m // 2 <= NORMAL_HEIGHT_UNKNOWNS:
+        levels, n, m = levels + 1, n + 3 * m // 2, 4 * m
+    return levels
 
 
 def _crease_choice(creases, coarse):

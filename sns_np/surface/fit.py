@@ -25,10 +25,7 @@ import numpy as np
 from .._atomic import exclusive, remove_stale_temporaries
 from .._progress import Progress
 from .._signals import deferred_signals
-from .._validation import (
-    as_generator,
-    check_choice,
-)
+from .._validation import as_generator
 from ..errors import DivergenceError, FitInterrupted, ModelFileError
 from ..geometry import area_element_from_jets, tangent_frame, tangent_jacobian
 from ..nn.mlp import ResidualMLP
@@ -40,7 +37,7 @@ from ..options import (  # noqa: F401  (AUTO, DETAIL_RANGE: the planning constan
     DETAIL_RANGE,
     MESH_SMOOTHING,
     FitOptions,
-    check_creases,
+    check_smooth,
 )
 from ..protocol import surface_jet
 from ..sampling import uniform_sphere
@@ -249,9 +246,16 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         :func:`sns_np.mesh.spherical_embedding` when omitted.
     check : bool
         Run :func:`sns_np.mesh.check` first (raises a specific MeshError on defects).
-    smooth : {"phong", "none"}
-        Position targets on the Phong-tessellated mesh (default: the mesh's vertex normals
-        bend each triangle like the surface it samples) or on the flat triangles.
+    smooth : {"auto", "normals", "phong", "none"}
+        The position targets between the vertices. "normals": the surface over the mesh
+        whose normals follow its interpolated vertex normals, tied to the mesh
+        (:class:`sns_np.mesh.NormalHeights`, a sparse solve of a few seconds before the fit,
+        counted in its budget); "phong": the Phong-tessellated mesh (the vertex normals bend
+        each triangle like the surface it samples, one triangle at a time); "none": the
+        flat triangles. "auto" (default): "normals" on a fine mesh, "phong" on a coarse one
+        (see ``creases``) or with a crease angle given; the choice and why are in the
+        report's ``choices["smooth"]`` and the model's metadata. docs/fitting.md, "The
+        default target".
     creases : "auto", "none" or float
         Edges along which the target normals are not averaged: with an angle in degrees, the
         two sides of every edge whose faces turn by more than it keep their own normals
@@ -260,8 +264,8 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         followed across its sharp edges (a coarse mesh: its Phong tessellation more than
         ``CREASE_GAP``, 1e-3 of the diagonal, off its triangles, or its vertex normals
         turning by more than ``COARSE_TURN``, 20 degrees, across a median edge), none
-        otherwise; recorded in the model's metadata. docs/fitting.md, "Meshes with sharp
-        edges".
+        otherwise and with ``smooth="normals"``, which refuses an angle; recorded in the
+        model's metadata. docs/fitting.md, "Meshes with sharp edges".
     **options
         The fitting options (:class:`FitOptions`: steps, batch, lr, time_budget, ...) and
         those of :func:`fit_sampler` (checkpoint, progress, ...).
@@ -278,10 +282,9 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
     >>> S, report = fit_mesh(V, F, width=16, depth=1, steps=30, batch=256, n_eval=500,
     ...                      progress=False)            # tiny; the defaults adapt to the mesh
     >>> S(np.array([[0.0, 0.0, 1.0]])).shape, report.steps, S.metadata["smooth"]
-    ((1, 3), 30, 'phong')
+    ((1, 3), 30, 'normals')
     """
-    check_choice(smooth, "smooth", set(MESH_SMOOTHING))
-    check_creases(creases)
+    check_smooth(smooth, creases)
     _check_early(options, mesh=True)
     for name in DERIVATIVE_WEIGHTS:             # before the embedding, not after it
         if options.get(name):
@@ -290,7 +293,7 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
     target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
                          smooth=smooth, crease_angle=creases)
     meta = {"source": options.pop("source", "mesh"), "n_vertices": int(len(V)),
-            "n_faces": int(len(F)), "area": target.area, "smooth": smooth,
+            "n_faces": int(len(F)), "area": target.area, "smooth": target.smooth,
             "crease_angle": target.crease_angle}
     return fit_sampler(target, metadata=meta, elapsed_before=time.perf_counter() - t0,
                        **options)
@@ -544,7 +547,8 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
     _check_checkpoint_options(checkpoint, checkpoint_every, checkpoint_seconds)
     t_dtype = np.dtype(o["dtype"])
     choices = _plan(target, o, net, elapsed=elapsed_before)     # fills in the "auto" options
-    if getattr(target, "crease_why", None):                     # fit_mesh's creases
+    if getattr(target, "crease_why", None):                     # fit_mesh's targets
+        choices["smooth"] = {"value": target.smooth, "why": target.smooth_why}
         choices["creases"] = {"value": target.crease_angle, "why": target.crease_why}
     rng = as_generator(o["seed"])
     key = _resume_key(target, FitOptions(**o), net)
