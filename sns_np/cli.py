@@ -68,10 +68,9 @@ def _add_fit_options(p):
     g = p.add_argument_group("fitting options (sns_np.surface.FitOptions; docs/fitting.md)")
     add_arguments(g, FitOptions, FIT_FLAGS)
     g.add_argument("--smooth", choices=MESH_SMOOTHING,
-                   help=f"position targets: the surface following the mesh's vertex "
-                        f"normals, the Phong-tessellated mesh or its flat triangles; auto "
-                        f"(default: {MESH_SMOOTHING[0]}): normals on a fine mesh, phong on a "
-                        f"coarse one")
+                   help=f"position targets: the Phong-tessellated mesh, the surface "
+                        f"following the mesh's vertex normals or its flat triangles "
+                        f"(default: {MESH_SMOOTHING[0]})")
     g.add_argument("--creases", type=_creases, metavar="{auto,none,DEGREES}",
                    help="keep the two sides of edges sharper than this many degrees apart in "
                         "the target normals; auto (default): 60 on a mesh too coarse for its "

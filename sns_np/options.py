@@ -377,18 +377,18 @@ HESSIAN_WEIGHT = {"embedding": 0.0, "exact": 1e-4}
 CHECKPOINT_STEPS = 500
 CHECKPOINT_SECONDS = 60.0
 
-#: position targets of a mesh fit (``fit_mesh(smooth=...)``), the default first: "auto"
-#: chooses "normals" on a fine mesh and "phong" on a coarse one (``coarseness`` below);
-#: "normals" the surface over the mesh whose normals follow its interpolated vertex normals
-#: (:class:`sns_np.mesh.NormalHeights`), "phong" the Phong-tessellated mesh, "none" its flat
-#: triangles (docs/fitting.md, "The default target: the mesh's normals, tied")
-MESH_SMOOTHING = ("auto", "normals", "phong", "none")
+#: position targets of a mesh fit (``fit_mesh(smooth=...)``), the default first: "phong" the
+#: Phong-tessellated mesh, "normals" the surface over the mesh whose normals follow its
+#: interpolated vertex normals (:class:`sns_np.mesh.NormalHeights`; spot 0.72 -> 0.54 deg,
+#: the others level, SPIKE's mesh worse against its truth: not the default, docs/fitting.md,
+#: "The mesh's normals as a target"), "none" its flat triangles
+MESH_SMOOTHING = ("phong", "normals", "none")
 
 #: the "normals" target's tie to the mesh's vertices (:class:`sns_np.mesh.NormalHeights`):
-#: measured on every shared mesh and two held-out ones, the surface at 3e-2 is about as near
-#: the mesh as the 540-s fit and its normals nearer the mesh's (spot 4.9e-4 of the diagonal /
-#: 0.66 deg, the armadillo 2.8e-4 / 1.30); on a mesh of an ellipsoid it is 6 times nearer the
-#: ellipsoid than the triangles. 1e-3 follows the normals more closely, 1 the vertices
+#: the surface at 3e-2 is about as near the mesh as the 540-s fit and its normals nearer the
+#: mesh's (spot 4.9e-4 of the diagonal / 0.66 deg, the armadillo 2.8e-4 / 1.30); on a mesh
+#: of an ellipsoid it is 6 times nearer the ellipsoid than the triangles. 1e-3 follows the
+#: normals more closely, 1 the vertices (nearer the truth on SPIKE's mesh)
 NORMAL_HEIGHT_TIE = 3e-2
 
 #: the "normals" target's heights are piecewise linear on the mesh's midpoint subdivision:
@@ -453,8 +453,8 @@ def check_smooth(smooth, creases="auto"):
 
     Examples
     --------
-    >>> check_smooth("auto"), check_smooth("phong", 45)
-    (('auto', 'auto'), ('phong', 45.0))
+    >>> check_smooth("normals"), check_smooth("phong", 45)
+    (('normals', 'auto'), ('phong', 45.0))
     >>> check_smooth("normals", 45)                  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...

@@ -15,6 +15,7 @@ import numpy as np
 
 from ..geometry import tangent_frame, tangent_jacobian
 from ..geometry.chart import chart_jets
+from ..options import check_smooth
 from ..protocol import surface_jet
 from ..sampling import uniform_sphere
 from .losses import normals_from_tangents
@@ -33,12 +34,12 @@ class _MeshTarget:
         F = np.asarray(F)
         if check:
             mesh.check(V, F)
-        # the mesh's coarseness is measured here for the "auto" choices, else on first use
-        # (the automatic vertex_fraction and closest_normal_weight)
-        if "auto" in (smooth, crease_angle):
+        self.smooth, crease_angle = check_smooth(smooth, crease_angle)
+        self.smooth_why = _SMOOTH_WHY[self.smooth]
+        # the mesh's coarseness is measured here for "auto" creases, else on first use (the
+        # automatic vertex_fraction and closest_normal_weight)
+        if crease_angle == "auto" and self.smooth != "normals":
             self.phong_gap, self.normal_turn = phong_gap(V, F), mesh.normal_turn(V, F)
-        self.smooth, self.smooth_why = _smooth_choice(
-            smooth, crease_angle, self.coarse if smooth == "auto" else None)
         if self.smooth == "normals" and crease_angle == "auto":
             self.crease_angle, self.crease_why = None, (
                 "none: the normal-following target follows the vertex normals across every "
@@ -68,8 +69,7 @@ class _MeshTarget:
                                 f"({len(self.heights.h):,} unknowns, tie {NORMAL_HEIGHT_TIE:g}, "
                                 f"solved in {self.heights.seconds:.1f} s)")
             if verbose:
-                print(f"target: the surface following the mesh's normals, {self.smooth_why}",
-                      flush=True)
+                print(f"target: {self.smooth_why}", flush=True)
             self.fingerprint += f":normals:tie={NORMAL_HEIGHT_TIE:g}:levels={levels}"
         if self.smooth not in ("phong", "normals") or self.crease_angle is not None:
             self.fingerprint += f":{self.smooth}:creases={self.crease_angle}"
@@ -229,21 +229,11 @@ class _ShapeTarget:
                 None if S2 is None else S2 / self.scale)
 
 
-def _smooth_choice(smooth, creases, coarse):
-    """The position targets ("normals", "phong" or "none") and why; ``coarse`` (the mesh's
-    :func:`coarseness`) is read for "auto" only."""
-    from ..options import check_smooth
-    smooth, creases = check_smooth(smooth, creases)
-    if smooth != "auto":
-        return smooth, "given"
-    if not isinstance(creases, str):
-        return "phong", (f"phong: a crease angle ({creases:g} deg) is given, and the "
-                         f"normal-following target keeps no creases")
-    is_coarse, why = coarse
-    if is_coarse:
-        return "phong", (f"phong: {why}, whose vertex normals are not followed between its "
-                         f"vertices")
-    return "normals", f"normals: {why}"
+#: what each position target is (the report's ``choices["smooth"]["why"]``)
+_SMOOTH_WHY = {
+    "phong": "the Phong tessellation of the mesh (the default)",
+    "normals": "the surface over the mesh that follows its interpolated vertex normals",
+    "none": "the mesh's flat triangles"}
 
 
 def normal_height_levels(n_vertices, n_faces):

@@ -246,16 +246,15 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         :func:`sns_np.mesh.spherical_embedding` when omitted.
     check : bool
         Run :func:`sns_np.mesh.check` first (raises a specific MeshError on defects).
-    smooth : {"auto", "normals", "phong", "none"}
-        The position targets between the vertices. "normals": the surface over the mesh
-        whose normals follow its interpolated vertex normals, tied to the mesh
-        (:class:`sns_np.mesh.NormalHeights`, a sparse solve of a few seconds before the fit,
-        counted in its budget); "phong": the Phong-tessellated mesh (the vertex normals bend
-        each triangle like the surface it samples, one triangle at a time); "none": the
-        flat triangles. "auto" (default): "normals" on a fine mesh, "phong" on a coarse one
-        (see ``creases``) or with a crease angle given; the choice and why are in the
-        report's ``choices["smooth"]`` and the model's metadata. docs/fitting.md, "The
-        default target".
+    smooth : {"phong", "normals", "none"}
+        The position targets between the vertices. "phong" (default): the Phong-tessellated
+        mesh (the vertex normals bend each triangle like the surface it samples, one
+        triangle at a time); "normals": the surface over the mesh whose normals follow its
+        interpolated vertex normals, held at its vertices (:class:`sns_np.mesh.NormalHeights`,
+        a sparse solve of a few seconds before the fit, counted in its budget; spot's normal
+        error 0.72 -> 0.54 degrees, the other shared meshes level, SPIKE's mesh further from
+        its truth); "none": the flat triangles. Recorded in ``report.choices["smooth"]`` and
+        the model's metadata. docs/fitting.md, "The mesh's normals as a target".
     creases : "auto", "none" or float
         Edges along which the target normals are not averaged: with an angle in degrees, the
         two sides of every edge whose faces turn by more than it keep their own normals
@@ -282,7 +281,7 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
     >>> S, report = fit_mesh(V, F, width=16, depth=1, steps=30, batch=256, n_eval=500,
     ...                      progress=False)            # tiny; the defaults adapt to the mesh
     >>> S(np.array([[0.0, 0.0, 1.0]])).shape, report.steps, S.metadata["smooth"]
-    ((1, 3), 30, 'normals')
+    ((1, 3), 30, 'phong')
     """
     check_smooth(smooth, creases)
     _check_early(options, mesh=True)
