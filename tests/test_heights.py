@@ -196,7 +196,7 @@ def test_the_normals_target_is_chosen_by_name_and_known_to_a_checkpoint():
     assert normals.heights.tie == NORMAL_HEIGHT_TIE and normals.crease_angle is None
     assert "round(s) of midpoint subdivision" in normals.smooth_why
     phong = _target(V, F, smooth="phong")
-    assert phong.heights is None and phong.smooth_why.endswith("(the default)")
+    assert phong.heights is None and phong.smooth_why.startswith("the Phong tessellation")
     assert phong.fingerprint != normals.fingerprint     # a checkpoint knows its targets
     assert normals.fingerprint == _target(V, F, smooth="normals").fingerprint
 

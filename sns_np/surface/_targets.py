@@ -231,7 +231,7 @@ class _ShapeTarget:
 
 #: what each position target is (the report's ``choices["smooth"]["why"]``)
 _SMOOTH_WHY = {
-    "phong": "the Phong tessellation of the mesh (the default)",
+    "phong": "the Phong tessellation of the mesh",
     "normals": "the surface over the mesh that follows its interpolated vertex normals",
     "none": "the mesh's flat triangles"}
 
