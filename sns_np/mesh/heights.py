@@ -202,7 +202,21 @@ class NormalHeights:
 
     def mesh(self):
         """The surface itself as a mesh: the subdivision's vertices moved along their unit
-        (interpolated) normals by ``h``, ``(V2, F2)``."""
+        (interpolated) normals by ``h``, ``(V2, F2)``.
+
+        Examples
+        --------
+        >>> from sns_np.mesh import icosphere
+        >>> V, F = icosphere(1)
+        >>> V2, F2 = NormalHeights(V, F, levels=1, tie=1.0).mesh()   # held at the vertices
+        >>> V2.shape, F2.shape
+        ((162, 3), (320, 3))
+        >>> r = np.linalg.norm(V2, axis=1)    # the edges' midpoints pushed out to the sphere
+        >>> round(float(r[:len(V)].mean()), 3), round(float(r[len(V):].mean()), 3)
+        (1.0, 1.001)
+        >>> round(float(np.linalg.norm(midpoint_subdivision(V, F)[0][len(V):], axis=1).mean()), 3)
+        0.956
+        """
         N2 = self._N2 / np.linalg.norm(self._N2, axis=1, keepdims=True)
         return self._V2 + self.h[:, None] * N2, self.F2
 
