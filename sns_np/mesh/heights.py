@@ -24,8 +24,8 @@ a small one follows the normals more closely and lets the surface leave the vert
 the normals disagree with them (noise, sharp features). On a level-4 mesh of an ellipsoid,
 the surface at the default tie (3e-2) is 6 times nearer the ellipsoid than the triangles
 (1.2e-4 against 7.3e-4 of the semi-axes' scale) and its normals 17 times nearer
-(0.066 against 1.13 degrees); docs/fitting.md ("The default target") measures it on every
-shared mesh.
+(0.066 against 1.13 degrees); docs/fitting.md ("The mesh's normals as a target") measures
+it on every shared mesh and as a fit's target.
 """
 
 from __future__ import annotations
@@ -168,7 +168,7 @@ class NormalHeights:
     (4.54, 0.26)
     """
 
-    def __init__(self, V, F, N=None, *, levels: int = 2, tie: float = 1e-3):
+    def __init__(self, V, F, N=None, *, levels: int = 2, tie: float = 3e-2):
         V, F = as_mesh(V, F)
         N = vertex_normals(V, F, weighting="angle") if N is None else as_points(N, "N")
         if N.shape != V.shape:
@@ -191,7 +191,8 @@ class NormalHeights:
         rhs = np.zeros(len(V2))
         for i in range(3):
             e = V2[F2[:, (i + 2) % 3]] - V2[F2[:, (i + 1) % 3]]
-            np.add.at(rhs, F2[:, i], -0.5 * np.einsum("ij,ij->i", np.cross(nf, e), t))
+            rhs -= 0.5 * np.bincount(F2[:, i], np.einsum("ij,ij->i", np.cross(nf, e), t),
+                                     minlength=len(V2))
         K = -cotan_laplacian(V2, F2)
         # a tie of 0 leaves the mean of h free (K is singular): the smallest tie fixes it
         pin = np.zeros(len(V2))
