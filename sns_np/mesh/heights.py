@@ -198,7 +198,7 @@ class NormalHeights:
         pin = np.zeros(len(V2))
         pin[:len(V)] = max(self.tie, 1e-12) * K.diagonal().mean()
         self.h = splu((K + sp.diags(pin)).tocsc()).solve(rhs)
-        self.F2, self._V2, self._N2 = F2, V2, N2
+        self.F2, self._mesh = F2, (V, F, N)          # the mesh itself, for mesh()
         self.seconds = time.perf_counter() - t0
 
     def mesh(self):
@@ -218,8 +218,10 @@ class NormalHeights:
         >>> round(float(np.linalg.norm(midpoint_subdivision(V, F)[0][len(V):], axis=1).mean()), 3)
         0.956
         """
-        N2 = self._N2 / np.linalg.norm(self._N2, axis=1, keepdims=True)
-        return self._V2 + self.h[:, None] * N2, self.F2
+        V, F, N = self._mesh
+        VN, _ = midpoint_subdivision(np.hstack([V, N]), F, self.levels)
+        N2 = VN[:, 3:] / np.linalg.norm(VN[:, 3:], axis=1, keepdims=True)
+        return VN[:, :3] + self.h[:, None] * N2, self.F2
 
     def __call__(self, face, beta) -> np.ndarray:
         """The heights ``(k,)`` at barycentric points ``(face, beta)`` of the mesh."""

@@ -38,15 +38,11 @@ class _MeshTarget:
         self.smooth_why = _SMOOTH_WHY[self.smooth]
         # the mesh's coarseness is measured here for "auto" creases, else on first use (the
         # automatic vertex_fraction and closest_normal_weight)
-        if crease_angle == "auto" and self.smooth != "normals":
+        auto = crease_angle == "auto" and self.smooth != "normals"
+        if auto:
             self.phong_gap, self.normal_turn = phong_gap(V, F), mesh.normal_turn(V, F)
-        if self.smooth == "normals" and crease_angle == "auto":
-            self.crease_angle, self.crease_why = None, (
-                "none: the normal-following target follows the vertex normals across every "
-                "edge")
-        else:
-            self.crease_angle, self.crease_why = _crease_choice(
-                crease_angle, self.coarse if crease_angle == "auto" else None)
+        self.crease_angle, self.crease_why = _crease_choice(
+            crease_angle, self.coarse if auto else None, self.smooth)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -253,15 +249,19 @@ def normal_height_levels(n_vertices, n_faces):
     return levels
 
 
-def _crease_choice(creases, coarse):
+def _crease_choice(creases, coarse, smooth="phong"):
     """The crease angle (degrees, or None for none) and why; ``coarse`` (the mesh's
-    :func:`coarseness`) is read for "auto" only."""
+    :func:`coarseness`) is read for "auto" only, and not with the "normals" target, which
+    follows the vertex normals across every edge."""
     from ..options import CREASE_ANGLE, check_creases
     creases = check_creases(creases)
     if creases == "none":
         return None, "given: the vertex normals interpolated everywhere"
     if creases != "auto":
         return creases, "given"
+    if smooth == "normals":
+        return None, ("none: the normal-following target follows the vertex normals across "
+                      "every edge")
     is_coarse, why = coarse
     if is_coarse:
         return CREASE_ANGLE, (f"{why}, whose vertex normals would round its sharp edges "
