@@ -7,7 +7,7 @@ Run::
     python benchmarks/fit_quality.py spot --time-budget 1800 # any fitting option
     python benchmarks/fit_quality.py dtype --steps 150       # float32 vs float64 training
     python benchmarks/fit_quality.py init --steps 200        # ridge read-out vs random init
-    python benchmarks/fit_quality.py detail                  # the detail measures of each case
+    python benchmarks/fit_quality.py detail                  # detail measures, curvature jitter
     python benchmarks/fit_quality.py loop spot max           # smooth surfaces near the mesh, scored
     python benchmarks/fit_quality.py models A.npz flower=B.npz  # saved fits: roughness, drift
     python benchmarks/fit_quality.py path/to/mesh.obj        # any closed genus-0 mesh file
@@ -92,12 +92,14 @@ from cad_shapes import CAD, cad_mesh, exact_away_from_edges  # noqa: E402
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
 from sns_np.mesh import (  # noqa: E402
     check,
+    cotan_laplacian,
     face_areas,
     load,
     mass_matrix,
     sample_surface,
     spherical_embedding,
 )
+from sns_np.mesh._arrays import unique_edges  # noqa: E402
 from sns_np.mesh.operators import vertex_normals  # noqa: E402
 from sns_np.options import MESH_SMOOTHING, check_creases  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
@@ -554,9 +556,27 @@ def models_case(args):
         print(line, flush=True)
 
 
+def curvature_jitter(V, F):
+    """How much a mesh's discrete mean curvature changes from a vertex to its neighbours:
+    the area-weighted mean of ``|H_i - mean_j H_j|`` (``j`` the neighbours of ``i``) over
+    that of ``|H_i|``, with ``H_i`` the cotangent Laplacian's mean curvature normal
+    ``(L V)_i / (2 A_i)`` along the vertex normal. Small (SPIKE at level 5: 0.07; an
+    icosphere: 0.005) where the mesh samples a surface that is smooth at its vertex spacing,
+    large (0.6-0.7 on the scans and sculptures) where the curvature's detail is as fine
+    as the vertices; docs/fitting.md, "A fine sample of a smooth surface"."""
+    V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
+    Av = mass_matrix(V, F).diagonal()
+    H = np.einsum("ij,ij->i", cotan_laplacian(V, F) @ V, vertex_normals(V, F)) / (2 * Av)
+    E = unique_edges(F, len(V))[0]
+    i, j = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+    around = np.bincount(i, H[j], len(V)) / np.bincount(i, minlength=len(V))
+    return float(np.sum(Av * np.abs(H - around)) / np.sum(Av * np.abs(H)))
+
+
 def detail_case(args):
     """The detail measures that choose the fitting defaults, for every case: the read-out
-    errors of the positions and of the unit normals."""
+    errors of the positions and of the unit normals; for a mesh, its curvature jitter too
+    (not a default's input)."""
     from sns_np.surface.fit import _MeshTarget, _ShapeTarget, readout_errors
     for case in ALL:
         if case in SHAPES:
@@ -565,7 +585,8 @@ def detail_case(args):
             V, F, _ = case_mesh(case, args.shared)
             target, n = _MeshTarget(V, F, verbose=False), len(V)
         d, dn = readout_errors(target)
-        print(f"{case}: {n} vertices, detail {d:.2e}, normals {dn:.2e}", flush=True)
+        jitter = "" if case in SHAPES else f", curvature jitter {curvature_jitter(V, F):.3f}"
+        print(f"{case}: {n} vertices, detail {d:.2e}, normals {dn:.2e}{jitter}", flush=True)
 
 
 def main(argv=None):
