@@ -92,7 +92,7 @@ from cad_shapes import CAD, cad_mesh, exact_away_from_edges  # noqa: E402
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
 from sns_np.mesh import (  # noqa: E402
     check,
-    cotan_laplacian,
+    discrete_curvatures,
     face_areas,
     load,
     mass_matrix,
@@ -559,18 +559,18 @@ def models_case(args):
 def curvature_jitter(V, F):
     """How much a mesh's discrete mean curvature changes from a vertex to its neighbours:
     the area-weighted mean of ``|H_i - mean_j H_j|`` (``j`` the neighbours of ``i``) over
-    that of ``|H_i|``, with ``H_i`` the cotangent Laplacian's mean curvature normal
-    ``(L V)_i / (2 A_i)`` along the vertex normal. Small (SPIKE at level 5: 0.07; an
-    icosphere: 0.005) where the mesh samples a surface that is smooth at its vertex spacing,
-    large (0.6-0.7 on the scans and sculptures) where the curvature's detail is as fine
-    as the vertices; docs/fitting.md, "A fine sample of a smooth surface"."""
+    that of ``|H_i|``, with ``H_i`` the cotangent mean curvature of
+    :func:`sns_np.mesh.discrete_curvatures` and its mixed-Voronoi areas. Small (SPIKE at
+    level 5: 0.07; the demo's ellipsoid: 0.004) where the mesh samples a surface that is smooth at
+    its vertex spacing, large (0.6-0.7 on the scans and sculptures) where the curvature's
+    detail is as fine as the vertices; docs/fitting.md, "A fine sample of a smooth surface"."""
     V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
-    Av = mass_matrix(V, F).diagonal()
-    H = np.einsum("ij,ij->i", cotan_laplacian(V, F) @ V, vertex_normals(V, F)) / (2 * Av)
+    H = discrete_curvatures(V, F).H
+    area = mass_matrix(V, F, "voronoi").diagonal()
     E = unique_edges(F, len(V))[0]
     i, j = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
     around = np.bincount(i, H[j], len(V)) / np.bincount(i, minlength=len(V))
-    return float(np.sum(Av * np.abs(H - around)) / np.sum(Av * np.abs(H)))
+    return float(np.sum(area * np.abs(H - around)) / np.sum(area * np.abs(H)))
 
 
 def detail_case(args):
