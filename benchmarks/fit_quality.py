@@ -92,14 +92,13 @@ from cad_shapes import CAD, cad_mesh, exact_away_from_edges  # noqa: E402
 from sns_np.geometry import differential_quantities, tangent_frame  # noqa: E402
 from sns_np.mesh import (  # noqa: E402
     check,
-    discrete_curvatures,
+    curvature_jitter,
     face_areas,
     load,
     mass_matrix,
     sample_surface,
     spherical_embedding,
 )
-from sns_np.mesh._arrays import unique_edges  # noqa: E402
 from sns_np.mesh.operators import vertex_normals  # noqa: E402
 from sns_np.options import MESH_SMOOTHING, check_creases  # noqa: E402
 from sns_np.protocol import surface_jet  # noqa: E402
@@ -556,27 +555,10 @@ def models_case(args):
         print(line, flush=True)
 
 
-def curvature_jitter(V, F):
-    """How much a mesh's discrete mean curvature changes from a vertex to its neighbours:
-    the area-weighted mean of ``|H_i - mean_j H_j|`` (``j`` the neighbours of ``i``) over
-    that of ``|H_i|``, with ``H_i`` the cotangent mean curvature of
-    :func:`sns_np.mesh.discrete_curvatures` and its mixed-Voronoi areas. Small (SPIKE at
-    level 5: 0.07; the demo's ellipsoid: 0.004) where the mesh samples a surface that is smooth at
-    its vertex spacing, large (0.6-0.7 on the scans and sculptures) where the curvature's
-    detail is as fine as the vertices; docs/fitting.md, "A fine sample of a smooth surface"."""
-    V, F = np.asarray(V, dtype=np.float64), np.asarray(F)
-    H = discrete_curvatures(V, F).H
-    area = mass_matrix(V, F, "voronoi").diagonal()
-    E = unique_edges(F, len(V))[0]
-    i, j = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
-    around = np.bincount(i, H[j], len(V)) / np.bincount(i, minlength=len(V))
-    return float(np.sum(area * np.abs(H - around)) / np.sum(area * np.abs(H)))
-
-
 def detail_case(args):
     """The detail measures that choose the fitting defaults, for every case: the read-out
     errors of the positions and of the unit normals; for a mesh, its curvature jitter too
-    (not a default's input)."""
+    (the input of the fine-sample rule, sns_np.surface._targets.smooth_sampling)."""
     from sns_np.surface.fit import _MeshTarget, _ShapeTarget, readout_errors
     for case in ALL:
         if case in SHAPES:

@@ -41,6 +41,7 @@ __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add
            "SAMPLINGS", "MESH_SMOOTHING", "NORMAL_HEIGHT_TIE", "NORMAL_HEIGHT_LEVELS",
            "NORMAL_HEIGHT_UNKNOWNS", "CREASE_GAP", "CREASE_ANGLE",
            "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "AREA_WEIGHT_MAX", "COARSE_TURN",
+           "SAMPLE_JITTER", "SAMPLE_VERTEX_FRACTION", "SAMPLE_TANGENT_WEIGHT",
            "check_creases", "check_smooth",
            "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME",
            "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
@@ -424,6 +425,23 @@ CREASE_ANGLE = 60.0
 COARSE_VERTEX_FRACTION = 0.25
 COARSE_CLOSEST_NORMAL = 0.01
 
+#: a fine sample of a smooth surface: a mesh that is not coarse and whose mean curvature
+#: changes from a vertex to its neighbours by at most ``SAMPLE_JITTER`` of its size on
+#: average (``sns_np.mesh.curvature_jitter``; SPIKE at icosphere level 5 0.072, the demo's
+#: ellipsoid 0.004, against 0.23-0.72 on every scan and sculpture measured and 0.7-1.3 on
+#: meshed CAD parts). Its vertices are then the data and its interpolated normals only an
+#: estimate (on SPIKE's mesh 1.1 degrees from the truth; interpolating even the exact vertex
+#: normals costs 0.52): the fit takes positions only, ``SAMPLE_VERTEX_FRACTION`` of each
+#: batch at the vertices and the rest at the Phong points, no normal loss, no nearest-point
+#: phase, and the tangential part of the position error weighted ``SAMPLE_TANGENT_WEIGHT``
+#: (the embedding's parameters of the points are piecewise linear; the surface need not
+#: follow them). On SPIKE's mesh: 0.121 deg / 1.46% / 1.95% against the exact normals, H and
+#: K, where its normal-following default gives 0.697 / 3.91% / 8.37% and libigl 0.64 / 5.7% /
+#: 10.3% (docs/fitting.md, "A fine sample of a smooth surface")
+SAMPLE_JITTER = 0.15
+SAMPLE_VERTEX_FRACTION = 0.5
+SAMPLE_TANGENT_WEIGHT = 0.01
+
 
 def check_creases(creases):
     """``creases`` of :func:`~sns_np.surface.fit_mesh` checked: "auto", "none" or an angle in
@@ -542,10 +560,13 @@ class FitOptions(Options):
     vertex_fraction: float | None = option(
         None, "share of each batch drawn at the mesh's vertices, whose positions are the "
         f"mesh's only exact data (a mesh only; default: {COARSE_VERTEX_FRACTION:g} on a "
-        f"coarse mesh, 0 otherwise)", Fraction(), resume=True)
+        f"coarse mesh, {SAMPLE_VERTEX_FRACTION:g} on a fine sample of a smooth surface, 0 "
+        f"otherwise)", Fraction(), resume=True)
     normal_weight: float | None = option(
         None, f"weight of the normal loss (default: {NORMAL_WEIGHT['embedding']:g} for a mesh, "
-        f"{NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is exact)",
+        f"0 for a fine sample of a smooth surface, whose interpolated normals are only an "
+        f"estimate, {NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is "
+        f"exact)",
         Real(allow_zero=True), resume=True)
     normal_huber: float | None = option(
         None, f"angle in degrees beyond which a point's normal error counts by its size, not "
@@ -569,12 +590,15 @@ class FitOptions(Options):
         None, f"scale of the first layer's initial weights (default: "
         f"{_auto('input_scale')}, interpolated in between; at most "
         f"{EXACT_INPUT_SCALE_MAX:g} for an analytic map)", Real(), resume=True)
-    tangent_weight: float = option(1.0, "weight of the tangential part of the position error",
-                                   Real(), resume=True)
+    tangent_weight: float | None = option(
+        None, f"weight of the tangential part of the position error (default: "
+        f"{SAMPLE_TANGENT_WEIGHT:g} on a fine sample of a smooth surface, whose vertices lead, "
+        f"1 otherwise)", Real(), resume=True)
     closest_after: float | None = option(
         None, f"fraction of the fit after which positions and normals are compared at the "
         f"mesh point nearest each network point, not at the embedding's correspondence (1: "
-        f"never; a mesh only; default: {_auto('closest_after')})", Fraction(), resume=True)
+        f"never; a mesh only; default: {_auto('closest_after')}; 1 on a fine sample of a "
+        f"smooth surface)", Fraction(), resume=True)
     closest_normal_weight: float | None = option(
         None, f"weight of the normal loss while targets are the nearest mesh points "
         f"(default: {CLOSEST_NORMAL_AREA:g} x the mean face area in normalised units, at most "

@@ -647,7 +647,7 @@ def test_auto_choices_follow_the_detail_and_are_recorded():
     assert set(r.choices) == {"detail", "normal_detail", "input_scale", "lr", "warmup",
                               "batch", "sampling",
                               "optimizer", "width", "depth", "jacobian_weight",
-                              "hessian_weight", "closest_after", "lr_min",
+                              "hessian_weight", "closest_after", "lr_min", "tangent_weight",
                               "second_moment_decay", "normal_huber"}
     assert r.options["second_moment_decay"] == 0.999     # SOAP's long memory for a map
     assert r.options["normal_huber"] == 0.0              # exact normals: the squared loss

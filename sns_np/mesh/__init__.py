@@ -8,7 +8,12 @@ Heavy optional dependencies (meshio, trimesh, libigl) are imported inside the fu
 need them.
 """
 
-from .baselines import Curvatures, baseline_curvatures, discrete_curvatures
+from .baselines import (
+    Curvatures,
+    baseline_curvatures,
+    curvature_jitter,
+    discrete_curvatures,
+)
 from .check import MeshSummary, check
 from .closest import ClosestPoint
 from .correspondence import Correspondence, sample_surface, uniform_barycentric
@@ -69,7 +74,7 @@ __all__ = [
     "mass_matrix", "surface_area", "signed_volume",
     # spectrum and baselines
     "laplacian_eigenmodes", "eigenvalues", "baseline_curvatures", "discrete_curvatures",
-    "Curvatures",
+    "curvature_jitter", "Curvatures",
     # spherical embedding
     "spherical_embedding", "EmbeddingReport", "mobius_centre", "minimise_stretch",
     "equalise_areas", "FoldRepair", "orientation_determinants", "spherical_triangle_areas",

@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._arrays import as_mesh
+from ._arrays import as_mesh, unique_edges
 from .operators import cotan_laplacian, face_angles, mass_matrix, vertex_normals
 
-__all__ = ["Curvatures", "baseline_curvatures", "discrete_curvatures"]
+__all__ = ["Curvatures", "baseline_curvatures", "curvature_jitter", "discrete_curvatures"]
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,45 @@ def discrete_curvatures(V, F) -> Curvatures:
     H = -np.einsum("ij,ij->i", cotan_laplacian(V, F) @ V, n) / (2.0 * m)
     angle_sum = np.bincount(F.ravel(), weights=face_angles(V, F).ravel(), minlength=V.shape[0])
     return Curvatures(H=H, K=(2.0 * np.pi - angle_sum) / m)
+
+
+def curvature_jitter(V, F) -> float:
+    """How much a mesh's mean curvature changes from one vertex to the next, relative to its
+    size: the area-weighted mean of ``|H_i - mean_j H_j|`` over that of ``|H_i|``, with
+    ``H_i`` the cotangent mean curvature of :func:`discrete_curvatures` at vertex ``i``, its
+    mixed-Voronoi area the weight and ``j`` its neighbours.
+
+    Where a mesh samples a surface that is smooth at its vertex spacing the curvature changes
+    little between neighbours (the demo's ellipsoid 0.004, SPIKE meshed at icosphere level 5
+    0.07); scans and sculptures carry detail as fine as their vertices (spot 0.23, the
+    armadillo 0.70), and a sharp edge's curvature lives on its vertices alone (a meshed cube
+    1.3). Invariant to scale and to rigid motions. docs/fitting.md, "A fine sample of a
+    smooth surface".
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from sns_np.mesh import icosphere
+    >>> V, F = icosphere(3)
+    >>> round(curvature_jitter(V, F), 4)                       # on the sphere: H constant
+    0.0
+    >>> round(curvature_jitter(V * [1.0, 1.3, 0.7], F), 3)     # an ellipsoid
+    0.013
+    >>> bumps = 1 + 0.01 * np.random.default_rng(0).standard_normal(len(V))
+    >>> round(curvature_jitter(V * bumps[:, None], F), 2)      # 1% noise at the vertices
+    0.81
+    """
+    V, F = as_mesh(V, F)
+    H = discrete_curvatures(V, F).H
+    area = mass_matrix(V, F, "voronoi").diagonal()
+    E = unique_edges(F, len(V))[0]
+    i, j = np.concatenate([E[:, 0], E[:, 1]]), np.concatenate([E[:, 1], E[:, 0]])
+    around = np.bincount(i, H[j], len(V)) / np.bincount(i, minlength=len(V))
+    size = float(np.sum(area * np.abs(H)))
+    if not size > 0:
+        raise ValueError("the mesh's mean curvature is zero at every vertex (a flat or "
+                         "degenerate mesh); curvature_jitter needs a closed curved surface")
+    return float(np.sum(area * np.abs(H - around)) / size)
 
 
 def baseline_curvatures(V, F, *, radius: int = 5) -> Curvatures:

@@ -26,6 +26,8 @@ from ..options import (
     NORMAL_DETAIL_RANGE,
     NORMAL_HUBER,
     NORMAL_WEIGHT,
+    SAMPLE_TANGENT_WEIGHT,
+    SAMPLE_VERTEX_FRACTION,
     SECOND_MOMENT_DECAY,
 )
 from ..sampling import uniform_sphere
@@ -257,12 +259,37 @@ def _coarse(target):
     return target.coarse
 
 
-def _vertex_fraction(target):
+def _smooth_sample(target, o, net, read_out):
+    """``(sample, why)``: whether the fit takes a fine sample of a smooth surface's recipe
+    (:func:`~sns_np.surface._targets.smooth_sampling`: positions only, its vertices leading);
+    only for a fresh fit of a mesh whose normal weight is left to "auto" (why None
+    otherwise: nothing chosen), and only for a detailed target (``read_out()``, the detail
+    read-out, at least halfway to the detailed end): on a smooth one, fitted at a small
+    scale in a short budget, the normals speed the fit (the demo's ellipsoid at 240 s:
+    0.227 deg / H 1.96% with them, 0.316 / 2.58% without; docs/fitting.md)."""
+    if net is not None or not hasattr(target, "smooth_sample") or o["normal_weight"] is not None:
+        return False, None
+    sample, why = target.smooth_sample
+    if sample:
+        d, dn = read_out()
+        t = _auto_values(d, "embedding", dn)[1]
+        if t < 0.5:
+            return False, (f"{why}; but a smooth target (detail {t:.2f} of the way to the "
+                           f"detailed end, below 0.5), fitted at a small scale in a short "
+                           f"budget, where following its normals is faster")
+    return sample, why
+
+
+def _vertex_fraction(target, sample=False):
     """The share of each batch drawn at the vertices, and why: ``COARSE_VERTEX_FRACTION`` on a
-    coarse mesh, 0 otherwise (why None: no mesh)."""
+    coarse mesh, ``SAMPLE_VERTEX_FRACTION`` on a fine sample of a smooth surface (``sample``),
+    0 otherwise (why None: no mesh)."""
     coarse, kind = _coarse(target)
     if kind is None:
         return 0.0, None        # no vertices (an analytic map): nothing to choose
+    if sample:
+        return SAMPLE_VERTEX_FRACTION, ("a fine sample of a smooth surface: its vertices are "
+                                        "exact, the Phong points between them the data too")
     if coarse:
         return COARSE_VERTEX_FRACTION, (f"{kind}: between its vertices the targets are "
                                         f"interpolated, at them exact")
@@ -295,8 +322,35 @@ def _plan(target, o, net, elapsed=0.0):
     if o["vertex_fraction"] and not hasattr(target, "sample_vertices"):
         raise ValueError(f"vertex_fraction={o['vertex_fraction']:g} needs a mesh target "
                          f"(fit_mesh); an analytic map has no vertices: use 0")
+    readout = []        # the detail read-out (readout_errors), measured once when needed
+
+    def read_out():
+        if not readout:
+            readout.extend(readout_errors(target))
+        return readout
+
+    sample, why = _smooth_sample(target, o, net, read_out)
+    if why is not None:
+        choices["smooth_sample"] = {"value": sample, "why": why}
+    if sample:      # positions only: the normals are an estimate, the vertices the data
+        o["normal_weight"] = 0.0
+        choices["normal_weight"] = {"value": 0.0, "why": "a fine sample of a smooth surface: "
+                                    "its interpolated normals are only an estimate of the "
+                                    "surface its vertices lie on"}
+        if o["closest_after"] is None:
+            o["closest_after"] = 1.0
+            choices["closest_after"] = {"value": 1.0, "why": "a fine sample of a smooth "
+                                        "surface: its points are matched where the embedding "
+                                        "puts them, only the tangential error relaxed"}
+    if o["tangent_weight"] is None:
+        o["tangent_weight"] = SAMPLE_TANGENT_WEIGHT if sample else 1.0
+        choices["tangent_weight"] = {
+            "value": o["tangent_weight"],
+            "why": "a fine sample of a smooth surface: the surface need not follow the "
+                   "embedding's piecewise-linear parameters, only pass through its points"
+                   if sample else "the plain squared distance"}
     if o["vertex_fraction"] is None:
-        o["vertex_fraction"], why = _vertex_fraction(target)
+        o["vertex_fraction"], why = _vertex_fraction(target, sample)
         if why is not None:
             choices["vertex_fraction"] = {"value": o["vertex_fraction"], "why": why}
     nearest = hasattr(target, "closest")      # targets at the nearest mesh point
@@ -368,7 +422,7 @@ def _plan(target, o, net, elapsed=0.0):
     if o["steps"] is None and o["time_budget"] is None:
         todo.append("time_budget")
     if todo:
-        d, dn = readout_errors(target)
+        d, dn = read_out()
         vals, t = _auto_values(d, param, dn)
         kind = "smooth" if t == 0 else "detailed" if t == 1 else f"between ({t:.2f})"
         choices["detail"] = {"value": d, "why": f"{kind}: read-out error of scale-4 features; "

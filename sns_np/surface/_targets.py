@@ -88,6 +88,22 @@ class _MeshTarget:
         """``(coarse, why)``: :func:`coarseness` of this mesh."""
         return coarseness(self.phong_gap, self.normal_turn)
 
+    @cached_property
+    def curvature_jitter(self):
+        """The mesh's :func:`~sns_np.mesh.curvature_jitter`: how smooth a sample it is."""
+        from .. import mesh
+        return mesh.curvature_jitter(self.corr.V, self.corr.F)
+
+    @property
+    def smooth_sample(self):
+        """``(sample, why)``: :func:`smooth_sampling` of this mesh; never with a target
+        other than the Phong points or with creases, which ask for the normals."""
+        if self.smooth != "phong" or self.crease_angle is not None:
+            return False, (f"the {self.smooth!r} target" + (
+                f" with creases at {self.crease_angle:g} deg" if self.crease_angle else "")
+                + ": its normals are followed")
+        return smooth_sampling(self.coarse, self.curvature_jitter)
+
     def _targets(self, face, beta):
         q, nrm = self.corr.to_mesh(face, beta)
         if self.smooth == "phong":
@@ -288,6 +304,29 @@ def coarseness(gap, turn):
     if gap > CREASE_GAP or turn > COARSE_TURN:
         return True, f"a coarse mesh ({said}: > {CREASE_GAP:g} or > {COARSE_TURN:g} deg)"
     return False, f"a fine mesh ({said}: <= {CREASE_GAP:g} and <= {COARSE_TURN:g} deg)"
+
+
+def smooth_sampling(coarse, jitter):
+    """``(sample, why)``: whether a mesh whose :func:`coarseness` is ``coarse`` and whose
+    :func:`~sns_np.mesh.curvature_jitter` is ``jitter`` is a fine sample of a smooth surface,
+    whose vertices lead the fit and whose interpolated normals are only an estimate: not
+    coarse, and a jitter of at most ``SAMPLE_JITTER``.
+
+    Examples
+    --------
+    >>> fine, rough = (False, "a fine mesh"), (True, "a coarse mesh")
+    >>> [smooth_sampling(c, j)[0] for c, j in ((fine, 0.07), (fine, 0.23), (rough, 0.0))]
+    [True, False, False]
+    """
+    from ..options import SAMPLE_JITTER
+    is_coarse, why = coarse
+    if is_coarse:
+        return False, f"{why}: not a fine sample"
+    said = f"its mean curvature changes by {jitter:.3f} of its size from vertex to vertex"
+    if jitter <= SAMPLE_JITTER:
+        return True, (f"a fine sample of a smooth surface ({said}: <= {SAMPLE_JITTER:g}); its "
+                      f"vertices lead, its interpolated normals are only an estimate")
+    return False, f"detail at its vertex spacing ({said}: > {SAMPLE_JITTER:g})"
 
 
 def phong_gap(V, F, n=20000):
