@@ -42,6 +42,7 @@ __all__ = ["FitOptions", "HeatOptions", "MCFOptions", "UnknownOptionError", "add
            "NORMAL_HEIGHT_UNKNOWNS", "CREASE_GAP", "CREASE_ANGLE",
            "COARSE_VERTEX_FRACTION", "COARSE_CLOSEST_NORMAL", "AREA_WEIGHT_MAX", "COARSE_TURN",
            "SAMPLE_JITTER", "SAMPLE_VERTEX_FRACTION", "SAMPLE_TANGENT_WEIGHT",
+           "RIPPLED_INPUT_SCALE",
            "check_creases", "check_smooth",
            "CHECKPOINT_STEPS", "CHECKPOINT_SECONDS", "SCHEMES", "DEFAULT_SCHEME",
            "DEFAULT_SNAPSHOTS", "HEAT_METHODS"]
@@ -435,12 +436,25 @@ COARSE_CLOSEST_NORMAL = 0.01
 #: batch at the vertices and the rest at the Phong points, no normal loss, no nearest-point
 #: phase, and the tangential part of the position error weighted ``SAMPLE_TANGENT_WEIGHT``
 #: (the embedding's parameters of the points are piecewise linear; the surface need not
-#: follow them). On SPIKE's mesh: 0.121 deg / 1.46% / 1.95% against the exact normals, H and
-#: K, where its normal-following default gives 0.697 / 3.91% / 8.37% and libigl 0.64 / 5.7% /
-#: 10.3% (docs/fitting.md, "A fine sample of a smooth surface")
+#: follow them). Only for a detailed target: a smooth one (the demo's ellipsoid, 0.004) is
+#: fitted faster with its normals. On SPIKE's mesh, 540 s alone: 0.118 deg / 1.46% / 1.98%
+#: against the exact normals, H and K, where the normal-following fit gave 0.694 / 3.87% /
+#: 8.27% and libigl 0.64 / 5.7% / 10.3% (docs/fitting.md, "A fine sample of a smooth
+#: surface, by default")
 SAMPLE_JITTER = 0.15
 SAMPLE_VERTEX_FRACTION = 0.5
 SAMPLE_TANGENT_WEIGHT = 0.01
+
+#: a mesh coarse for its curvature alone (its normals turn by more than ``COARSE_TURN``
+#: degrees across a median edge, its Phong tessellation within ``CREASE_GAP`` of its
+#: triangles: ripples a few edges wide, like BOBBLE's at icosphere level 5) is fitted by its
+#: positions as a fine sample is, its first layer's scale at most ``RIPPLED_INPUT_SCALE``
+#: (an analytic map's cap, ``EXACT_INPUT_SCALE_MAX``): sampled by the vertices alone, the
+#: ripples pin down no finer features. BOBBLE's mesh, one-thread pairs at 540 s: 2.64 deg /
+#: 19.6% / 26.6% against its exact normals, H and K at scale 16, 3.58 / 31.1% / 43.5% at 40,
+#: about 7.0 / 39% / 74% with the coarse mesh's normal-following defaults; libigl 6.04 /
+#: 42.1% / 74.4% (docs/fitting.md, "A fine sample of a smooth surface, by default")
+RIPPLED_INPUT_SCALE = 16.0
 
 
 def check_creases(creases):

@@ -48,35 +48,40 @@ def test_curvature_jitter_falls_as_a_smooth_surface_is_sampled_finer():
 
 def test_the_paper_meshes_and_a_cad_part_by_the_rule():
     # SPIKE at level 5 is a fine sample (its normals turn by 10 degrees per edge, its
-    # curvature varies slowly), BOBBLE's ripples at the same level are coarse for their
-    # curvature, so not one; a cube's curvature lives on its edges' vertices alone
+    # curvature varies slowly); BOBBLE's ripples at the same level are coarse for their
+    # curvature alone (its normals turn by 31 degrees per edge, its Phong points stay near
+    # its triangles): rippled; a cube's curvature lives on its edges' vertices alone
     from sns_np.mesh import normal_turn
-    from sns_np.surface._targets import coarseness, phong_gap
+    from sns_np.surface._targets import phong_gap
 
     def rule(V, F):
-        return smooth_sampling(coarseness(phong_gap(V, F), normal_turn(V, F)),
-                               curvature_jitter(V, F))
+        return smooth_sampling(phong_gap(V, F), normal_turn(V, F), curvature_jitter(V, F))
 
     V, F = Spike().mesh(5)
-    sample, why = rule(V, F)
-    assert sample and curvature_jitter(V, F) < SAMPLE_JITTER / 2
+    kind, why = rule(V, F)
+    assert kind == "fine" and curvature_jitter(V, F) < SAMPLE_JITTER / 2
     assert why.startswith("a fine sample of a smooth surface")
-    sample, why = rule(*Bobble().mesh(5))
-    assert not sample and "coarse mesh" in why and why.endswith("not a fine sample")
+    kind, why = rule(*Bobble().mesh(5))
+    assert kind == "rippled" and "coarse for its curvature alone" in why
     from .test_creases import cube
     V, F = cube(12)
-    assert not rule(V, F)[0] and curvature_jitter(V, F) > 5 * SAMPLE_JITTER
+    assert rule(V, F)[0] is None and curvature_jitter(V, F) > 5 * SAMPLE_JITTER
 
 
-def test_smooth_sampling_names_its_measure_and_threshold():
-    fine = (False, "a fine mesh (...)")
-    sample, why = smooth_sampling(fine, 0.0712)
-    assert sample and "0.071" in why and f"<= {SAMPLE_JITTER:g}" in why
-    sample, why = smooth_sampling(fine, SAMPLE_JITTER * 1.01)
-    assert not sample and why.startswith("detail at its vertex spacing")
-    assert smooth_sampling(fine, SAMPLE_JITTER)[0]      # the threshold itself is a sample
-    sample, why = smooth_sampling((True, "a coarse mesh (its gap ...)"), 0.0)
-    assert not sample and why.startswith("a coarse mesh")
+def test_smooth_sampling_names_its_measures_and_thresholds():
+    from sns_np.options import COARSE_TURN, CREASE_GAP
+    kind, why = smooth_sampling(3e-4, 10.0, 0.0712)
+    assert kind == "fine" and "0.071" in why and f"<= {SAMPLE_JITTER:g}" in why
+    kind, why = smooth_sampling(3e-4, 10.0, SAMPLE_JITTER * 1.01)
+    assert kind is None and why.startswith("detail at its vertex spacing")
+    assert smooth_sampling(3e-4, 10.0, SAMPLE_JITTER)[0] == "fine"   # the threshold itself
+    # coarse for its size: never, whatever its jitter; for its curvature alone: rippled
+    kind, why = smooth_sampling(2 * CREASE_GAP, 10.0, 0.0)
+    assert kind is None and why.startswith("a coarse mesh") and "not a fine sample" in why
+    assert smooth_sampling(2 * CREASE_GAP, 2 * COARSE_TURN, 0.0)[0] is None
+    kind, why = smooth_sampling(CREASE_GAP, COARSE_TURN + 1, 0.9)
+    assert kind == "rippled" and "31.1" not in why and f"{COARSE_TURN + 1:.1f} deg" in why
+    assert smooth_sampling(CREASE_GAP, COARSE_TURN, 0.9)[0] is None   # not beyond the turn
 
 
 def _tiny(V, F, **kw):
@@ -103,14 +108,15 @@ def _tiny_on(mesh, V=None, **kw):
 def test_a_fine_sample_is_fitted_by_its_positions_and_says_so(sample_mesh):
     S, report = _tiny_on(sample_mesh)
     c = report.choices
-    assert c["smooth_sample"]["value"] is True
+    assert c["smooth_sample"]["value"] == "fine"
     assert c["smooth_sample"]["why"].startswith("a fine sample of a smooth surface")
     assert c["normal_weight"]["value"] == 0.0
     assert c["vertex_fraction"]["value"] == SAMPLE_VERTEX_FRACTION
     assert c["tangent_weight"]["value"] == SAMPLE_TANGENT_WEIGHT
     assert c["closest_after"]["value"] == 1.0
     assert c["closest_normal_weight"]["value"] == 0.0 and c["area_weight_max"]["value"] == 0.0
-    assert S.metadata["fit"]["choices"]["smooth_sample"]["value"] is True
+    assert S.metadata["fit"]["choices"]["smooth_sample"]["value"] == "fine"
+    assert "at most" not in c["input_scale"]["why"]   # a fine sample keeps the detail's scale
 
 
 def test_a_given_normal_weight_keeps_the_normal_following_defaults(sample_mesh):
@@ -123,7 +129,7 @@ def test_a_given_normal_weight_keeps_the_normal_following_defaults(sample_mesh):
 def test_a_given_choice_stands_inside_the_rule(sample_mesh):
     _, report = _tiny_on(sample_mesh, tangent_weight=0.3, vertex_fraction=0.1)
     c = report.choices
-    assert c["smooth_sample"]["value"] is True and c["normal_weight"]["value"] == 0.0
+    assert c["smooth_sample"]["value"] == "fine" and c["normal_weight"]["value"] == 0.0
     assert "tangent_weight" not in c and "vertex_fraction" not in c
     assert report.options["tangent_weight"] == 0.3 and report.options["vertex_fraction"] == 0.1
 
@@ -158,3 +164,26 @@ def test_a_warm_start_keeps_its_loss(sample_mesh):
     _, report = _tiny_on(sample_mesh, net=S.net)
     assert "smooth_sample" not in report.choices
     assert report.options["tangent_weight"] == 1.0
+
+
+def test_a_rippled_mesh_is_fitted_by_its_positions_uncreased_at_a_capped_scale():
+    # BOBBLE at level 5 (a rippled mesh needs many vertices: curvature times the edge large,
+    # times its square small), coarse for its curvature alone: "auto" would crease it at 60
+    # degrees and follow its normals; taken by its positions, it is left uncreased and its
+    # first layer's scale is capped
+    from sns_np.mesh import spherical_embedding
+    from sns_np.options import CREASE_ANGLE, RIPPLED_INPUT_SCALE
+    V, F = Bobble().mesh(5)
+    Vs = spherical_embedding(V, F)[0]
+    S, report = _tiny(V, F, Vs=Vs)
+    c = report.choices
+    assert c["smooth_sample"]["value"] == "rippled"
+    assert c["creases"]["value"] is None and "no normals to crease" in c["creases"]["why"]
+    assert S.metadata["crease_angle"] is None
+    assert c["normal_weight"]["value"] == 0.0 and c["tangent_weight"]["value"] == 0.01
+    assert c["input_scale"]["value"] == RIPPLED_INPUT_SCALE
+    assert f"at most {RIPPLED_INPUT_SCALE:g} for ripples" in c["input_scale"]["why"]
+    # with a normal weight given the rule is off: the coarse mesh's creases and scale
+    S, report = _tiny(V, F, Vs=Vs, normal_weight=1.0)
+    assert report.choices["creases"]["value"] == CREASE_ANGLE == S.metadata["crease_angle"]
+    assert report.options["input_scale"] > RIPPLED_INPUT_SCALE

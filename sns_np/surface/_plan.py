@@ -26,6 +26,7 @@ from ..options import (
     NORMAL_DETAIL_RANGE,
     NORMAL_HUBER,
     NORMAL_WEIGHT,
+    RIPPLED_INPUT_SCALE,
     SAMPLE_TANGENT_WEIGHT,
     SAMPLE_VERTEX_FRACTION,
     SECOND_MOMENT_DECAY,
@@ -260,24 +261,25 @@ def _coarse(target):
 
 
 def _smooth_sample(target, o, net, read_out):
-    """``(sample, why)``: whether the fit takes a fine sample of a smooth surface's recipe
-    (:func:`~sns_np.surface._targets.smooth_sampling`: positions only, its vertices leading);
-    only for a fresh fit of a mesh whose normal weight is left to "auto" (why None
-    otherwise: nothing chosen), and only for a detailed target (``read_out()``, the detail
-    read-out, at least halfway to the detailed end): on a smooth one, fitted at a small
-    scale in a short budget, the normals speed the fit (the demo's ellipsoid at 240 s:
-    0.227 deg / H 1.96% with them, 0.316 / 2.58% without; docs/fitting.md)."""
+    """``(kind, why)``: whether the fit takes the recipe of a mesh whose vertices sample a
+    smooth surface (:func:`~sns_np.surface._targets.smooth_sampling`, ``kind`` "fine" or
+    "rippled": positions only, its vertices leading; None: not); only for a fresh fit of a
+    mesh whose normal weight is left to "auto" (why None otherwise: nothing chosen), and only
+    for a detailed target (``read_out()``, the detail read-out, at least halfway to the
+    detailed end): on a smooth one, fitted at a small scale in a short budget, the normals
+    speed the fit (the demo's ellipsoid at 240 s: 0.227 deg / H 1.96% with them, 0.316 /
+    2.58% without; docs/fitting.md)."""
     if net is not None or not hasattr(target, "smooth_sample") or o["normal_weight"] is not None:
-        return False, None
-    sample, why = target.smooth_sample
-    if sample:
+        return None, None
+    kind, why = target.smooth_sample
+    if kind is not None:
         d, dn = read_out()
         t = _auto_values(d, "embedding", dn)[1]
         if t < 0.5:
-            return False, (f"{why}; but a smooth target (detail {t:.2f} of the way to the "
-                           f"detailed end, below 0.5), fitted at a small scale in a short "
-                           f"budget, where following its normals is faster")
-    return sample, why
+            return None, (f"{why}; but a smooth target (detail {t:.2f} of the way to the "
+                          f"detailed end, below 0.5), fitted at a small scale in a short "
+                          f"budget, where following its normals is faster")
+    return kind, why
 
 
 def _vertex_fraction(target, sample=False):
@@ -288,7 +290,7 @@ def _vertex_fraction(target, sample=False):
     if kind is None:
         return 0.0, None        # no vertices (an analytic map): nothing to choose
     if sample:
-        return SAMPLE_VERTEX_FRACTION, ("a fine sample of a smooth surface: its vertices are "
+        return SAMPLE_VERTEX_FRACTION, ("its vertices sample a smooth surface: they are "
                                         "exact, the Phong points between them the data too")
     if coarse:
         return COARSE_VERTEX_FRACTION, (f"{kind}: between its vertices the targets are "
@@ -329,24 +331,25 @@ def _plan(target, o, net, elapsed=0.0):
             readout.extend(readout_errors(target))
         return readout
 
-    sample, why = _smooth_sample(target, o, net, read_out)
+    sampled, why = _smooth_sample(target, o, net, read_out)
+    sample = sampled is not None
     if why is not None:
-        choices["smooth_sample"] = {"value": sample, "why": why}
+        choices["smooth_sample"] = {"value": sampled or False, "why": why}
     if sample:      # positions only: the normals are an estimate, the vertices the data
         o["normal_weight"] = 0.0
-        choices["normal_weight"] = {"value": 0.0, "why": "a fine sample of a smooth surface: "
-                                    "its interpolated normals are only an estimate of the "
-                                    "surface its vertices lie on"}
+        choices["normal_weight"] = {"value": 0.0, "why": "its vertices sample a smooth "
+                                    "surface: its interpolated normals are only an estimate of "
+                                    "the surface they lie on"}
         if o["closest_after"] is None:
             o["closest_after"] = 1.0
-            choices["closest_after"] = {"value": 1.0, "why": "a fine sample of a smooth "
+            choices["closest_after"] = {"value": 1.0, "why": "its vertices sample a smooth "
                                         "surface: its points are matched where the embedding "
                                         "puts them, only the tangential error relaxed"}
     if o["tangent_weight"] is None:
         o["tangent_weight"] = SAMPLE_TANGENT_WEIGHT if sample else 1.0
         choices["tangent_weight"] = {
             "value": o["tangent_weight"],
-            "why": "a fine sample of a smooth surface: the surface need not follow the "
+            "why": "its vertices sample a smooth surface: the fit need not follow the "
                    "embedding's piecewise-linear parameters, only pass through its points"
                    if sample else "the plain squared distance"}
     if o["vertex_fraction"] is None:
@@ -440,6 +443,8 @@ def _plan(target, o, net, elapsed=0.0):
                 v = int(round(v))
             elif k == "width":          # a multiple of 16, as the products like it
                 v = int(16 * round(v / 16))
+            elif k == "input_scale" and sampled == "rippled":
+                v = min(v, RIPPLED_INPUT_SCALE)
             o[k] = v
             choices[k] = {"value": v, "why": f"{kind} target"
                           + (f": an analytic map's {_EXACT_WHAT[k]}" if k in AUTO_EXACT
@@ -447,6 +452,10 @@ def _plan(target, o, net, elapsed=0.0):
                           + (f"; at most {EXACT_INPUT_SCALE_MAX:g} for an analytic map"
                              if k == "input_scale" and param == "exact"
                              and v >= EXACT_INPUT_SCALE_MAX else "")
+                          + (f"; at most {RIPPLED_INPUT_SCALE:g} for ripples sampled at the "
+                             f"vertices alone, which pin down no finer features"
+                             if k == "input_scale" and sampled == "rippled"
+                             and v >= RIPPLED_INPUT_SCALE else "")
                           + (f"; {vals[k]:.0f} s in all less {elapsed:.1f} s of embedding"
                              if k == "time_budget" and elapsed else "")
                           + (_SAMPLING_WHY[v] if k == "sampling" else "")

@@ -28,7 +28,7 @@ class _MeshTarget:
     parametrisation = "embedding"
 
     def __init__(self, V, F, Vs=None, check=True, verbose=True, smooth="phong",
-                 crease_angle="none"):
+                 crease_angle="none", positions=False):
         from .. import mesh
         V = np.asarray(V, dtype=np.float64)
         F = np.asarray(F)
@@ -38,11 +38,17 @@ class _MeshTarget:
         self.smooth_why = _SMOOTH_WHY[self.smooth]
         # the mesh's coarseness is measured here for "auto" creases, else on first use (the
         # automatic vertex_fraction and closest_normal_weight)
+        # (``positions``: the fit may take a sampled surface by its positions, fit_mesh's
+        # normal weight left to auto; "auto" then leaves a rippled mesh uncreased)
         auto = crease_angle == "auto" and self.smooth != "normals"
+        sample = None
         if auto:
             self.phong_gap, self.normal_turn = phong_gap(V, F), mesh.normal_turn(V, F)
+            if positions and self.smooth == "phong":
+                self.curvature_jitter = mesh.curvature_jitter(V, F)
+                sample = smooth_sampling(self.phong_gap, self.normal_turn, self.curvature_jitter)
         self.crease_angle, self.crease_why = _crease_choice(
-            crease_angle, self.coarse if auto else None, self.smooth)
+            crease_angle, self.coarse if auto else None, self.smooth, sample)
         if Vs is None:
             Vs = mesh.spherical_embedding(V, F, verbose=verbose)[0]
         self.corr = mesh.Correspondence(V, F, Vs, crease_angle=self.crease_angle)
@@ -96,13 +102,13 @@ class _MeshTarget:
 
     @property
     def smooth_sample(self):
-        """``(sample, why)``: :func:`smooth_sampling` of this mesh; never with a target
-        other than the Phong points or with creases, which ask for the normals."""
+        """``(kind, why)``: :func:`smooth_sampling` of this mesh; never (``kind`` None) with a
+        target other than the Phong points or with creases, which ask for the normals."""
         if self.smooth != "phong" or self.crease_angle is not None:
-            return False, (f"the {self.smooth!r} target" + (
+            return None, (f"the {self.smooth!r} target" + (
                 f" with creases at {self.crease_angle:g} deg" if self.crease_angle else "")
                 + ": its normals are followed")
-        return smooth_sampling(self.coarse, self.curvature_jitter)
+        return smooth_sampling(self.phong_gap, self.normal_turn, self.curvature_jitter)
 
     def _targets(self, face, beta):
         q, nrm = self.corr.to_mesh(face, beta)
@@ -265,10 +271,11 @@ def normal_height_levels(n_vertices, n_faces):
     return levels
 
 
-def _crease_choice(creases, coarse, smooth="phong"):
+def _crease_choice(creases, coarse, smooth="phong", sample=None):
     """The crease angle (degrees, or None for none) and why; ``coarse`` (the mesh's
     :func:`coarseness`) is read for "auto" only, and not with the "normals" target, which
-    follows the vertex normals across every edge."""
+    follows the vertex normals across every edge, nor for a rippled mesh that the fit may
+    take by its positions (``sample``, :func:`smooth_sampling`'s answer, given then)."""
     from ..options import CREASE_ANGLE, check_creases
     creases = check_creases(creases)
     if creases == "none":
@@ -278,6 +285,8 @@ def _crease_choice(creases, coarse, smooth="phong"):
     if smooth == "normals":
         return None, ("none: the normal-following target follows the vertex normals across "
                       "every edge")
+    if sample is not None and sample[0] == "rippled":
+        return None, f"none: {sample[1]}; fitted by its positions, with no normals to crease"
     is_coarse, why = coarse
     if is_coarse:
         return CREASE_ANGLE, (f"{why}, whose vertex normals would round its sharp edges "
@@ -306,27 +315,38 @@ def coarseness(gap, turn):
     return False, f"a fine mesh ({said}: <= {CREASE_GAP:g} and <= {COARSE_TURN:g} deg)"
 
 
-def smooth_sampling(coarse, jitter):
-    """``(sample, why)``: whether a mesh whose :func:`coarseness` is ``coarse`` and whose
-    :func:`~sns_np.mesh.curvature_jitter` is ``jitter`` is a fine sample of a smooth surface,
-    whose vertices lead the fit and whose interpolated normals are only an estimate: not
-    coarse, and a jitter of at most ``SAMPLE_JITTER``.
+def smooth_sampling(gap, turn, jitter):
+    """``(kind, why)``: whether a mesh with Phong gap ``gap`` (:func:`phong_gap`), normal turn
+    ``turn`` (:func:`~sns_np.mesh.normal_turn`) and curvature jitter ``jitter``
+    (:func:`~sns_np.mesh.curvature_jitter`) samples a smooth surface at its vertices, which
+    then lead the fit while its interpolated normals are only an estimate; ``kind`` is
+
+    * ``"fine"``: a fine mesh (not coarse by :func:`coarseness`) whose jitter is at most
+      ``SAMPLE_JITTER``, a surface smooth at its vertex spacing;
+    * ``"rippled"``: coarse for its curvature alone, its normals turning by more than
+      ``COARSE_TURN`` degrees across a median edge while its Phong tessellation stays within
+      ``CREASE_GAP`` of its triangles: ripples a few edges wide, sampled by the vertices,
+      between which no interpolated normal is to be trusted;
+    * ``None`` otherwise (coarse for its size, or detail as fine as its vertices).
 
     Examples
     --------
-    >>> fine, rough = (False, "a fine mesh"), (True, "a coarse mesh")
-    >>> [smooth_sampling(c, j)[0] for c, j in ((fine, 0.07), (fine, 0.23), (rough, 0.0))]
-    [True, False, False]
+    >>> [smooth_sampling(g, t, j)[0] for g, t, j in ((3e-4, 10.0, 0.07), (3e-4, 10.0, 0.23),
+    ...                                                (9e-4, 31.0, 0.46), (2e-3, 5.0, 0.0))]
+    ['fine', None, 'rippled', None]
     """
-    from ..options import SAMPLE_JITTER
-    is_coarse, why = coarse
-    if is_coarse:
-        return False, f"{why}: not a fine sample"
+    from ..options import COARSE_TURN, CREASE_GAP, SAMPLE_JITTER
+    coarse, why = coarseness(gap, turn)
+    if gap <= CREASE_GAP and turn > COARSE_TURN:
+        return "rippled", (f"{why}: coarse for its curvature alone, ripples sampled at its "
+                           f"vertices; they lead, its interpolated normals are guesses")
+    if coarse:
+        return None, f"{why}: not a fine sample"
     said = f"its mean curvature changes by {jitter:.3f} of its size from vertex to vertex"
     if jitter <= SAMPLE_JITTER:
-        return True, (f"a fine sample of a smooth surface ({said}: <= {SAMPLE_JITTER:g}); its "
-                      f"vertices lead, its interpolated normals are only an estimate")
-    return False, f"detail at its vertex spacing ({said}: > {SAMPLE_JITTER:g})"
+        return "fine", (f"a fine sample of a smooth surface ({said}: <= {SAMPLE_JITTER:g}); "
+                        f"its vertices lead, its interpolated normals are only an estimate")
+    return None, f"detail at its vertex spacing ({said}: > {SAMPLE_JITTER:g})"
 
 
 def phong_gap(V, F, n=20000):

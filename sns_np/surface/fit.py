@@ -289,8 +289,11 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         if options.get(name):
             raise ValueError(NO_JACOBIAN.format(name, options[name]))
     t0 = time.perf_counter()
+    # a mesh sampled at its vertices may be fitted by its positions ("auto" normal weight,
+    # a fresh fit): its creases are then decided with that in mind
+    positions = options.get("normal_weight") is None and options.get("net") is None
     target = _MeshTarget(V, F, Vs, check=check, verbose=options.get("progress", True),
-                         smooth=smooth, crease_angle=creases)
+                         smooth=smooth, crease_angle=creases, positions=positions)
     meta = {"source": options.pop("source", "mesh"), "n_vertices": int(len(V)),
             "n_faces": int(len(F)), "area": target.area, "smooth": target.smooth,
             "crease_angle": target.crease_angle}
