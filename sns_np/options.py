@@ -574,13 +574,13 @@ class FitOptions(Options):
     vertex_fraction: float | None = option(
         None, "share of each batch drawn at the mesh's vertices, whose positions are the "
         f"mesh's only exact data (a mesh only; default: {COARSE_VERTEX_FRACTION:g} on a "
-        f"coarse mesh, {SAMPLE_VERTEX_FRACTION:g} on a fine sample of a smooth surface, 0 "
-        f"otherwise)", Fraction(), resume=True)
+        f"coarse mesh, {SAMPLE_VERTEX_FRACTION:g} on a mesh whose vertices sample a smooth "
+        f"surface, 0 otherwise)", Fraction(), resume=True)
     normal_weight: float | None = option(
         None, f"weight of the normal loss (default: {NORMAL_WEIGHT['embedding']:g} for a mesh, "
-        f"0 for a fine sample of a smooth surface, whose interpolated normals are only an "
-        f"estimate, {NORMAL_WEIGHT['exact']:g} for an analytic map, whose parametrisation is "
-        f"exact)",
+        f"0 for a mesh whose vertices sample a smooth surface, whose interpolated normals are "
+        f"only an estimate, {NORMAL_WEIGHT['exact']:g} for an analytic map, whose "
+        f"parametrisation is exact)",
         Real(allow_zero=True), resume=True)
     normal_huber: float | None = option(
         None, f"angle in degrees beyond which a point's normal error counts by its size, not "
@@ -606,13 +606,13 @@ class FitOptions(Options):
         f"{EXACT_INPUT_SCALE_MAX:g} for an analytic map)", Real(), resume=True)
     tangent_weight: float | None = option(
         None, f"weight of the tangential part of the position error (default: "
-        f"{SAMPLE_TANGENT_WEIGHT:g} on a fine sample of a smooth surface, whose vertices lead, "
-        f"1 otherwise)", Real(), resume=True)
+        f"{SAMPLE_TANGENT_WEIGHT:g} on a mesh whose vertices sample a smooth surface, 1 "
+        f"otherwise)", Real(), resume=True)
     closest_after: float | None = option(
         None, f"fraction of the fit after which positions and normals are compared at the "
         f"mesh point nearest each network point, not at the embedding's correspondence (1: "
-        f"never; a mesh only; default: {_auto('closest_after')}; 1 on a fine sample of a "
-        f"smooth surface)", Fraction(), resume=True)
+        f"never; a mesh only; default: {_auto('closest_after')}; 1 on a mesh whose vertices "
+        f"sample a smooth surface)", Fraction(), resume=True)
     closest_normal_weight: float | None = option(
         None, f"weight of the normal loss while targets are the nearest mesh points "
         f"(default: {CLOSEST_NORMAL_AREA:g} x the mean face area in normalised units, at most "

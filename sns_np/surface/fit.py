@@ -263,8 +263,10 @@ def fit_mesh(V, F, *, Vs=None, check=True, smooth=MESH_SMOOTHING[0], creases="au
         followed across its sharp edges (a coarse mesh: its Phong tessellation more than
         ``CREASE_GAP``, 1e-3 of the diagonal, off its triangles, or its vertex normals
         turning by more than ``COARSE_TURN``, 20 degrees, across a median edge), none
-        otherwise and with ``smooth="normals"``, which refuses an angle; recorded in the
-        model's metadata. docs/fitting.md, "Meshes with sharp edges".
+        otherwise, with ``smooth="normals"``, which refuses an angle, and on a mesh coarse
+        for its curvature alone when the normal weight is left to auto (it is then fitted by
+        its positions: ``normal_weight``); recorded in the model's metadata.
+        docs/fitting.md, "Meshes with sharp edges".
     **options
         The fitting options (:class:`FitOptions`: steps, batch, lr, time_budget, ...) and
         those of :func:`fit_sampler` (checkpoint, progress, ...).
@@ -385,13 +387,15 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         position term is dominated by the tangential error of the spherical embedding and the
         reference's 1e-4 would leave nothing to steer past it; 0.1 for an analytic map, whose
         parametrisation is exact and where weight 1 lets the network trade position for
-        normals. docs/fitting.md measures both. On a fine sample of a smooth surface
-        (:func:`~sns_np.surface._targets.smooth_sampling`: a fine mesh whose
-        :func:`~sns_np.mesh.curvature_jitter` is at most ``SAMPLE_JITTER``, 0.15) "auto"
-        takes 0 and with it that case's ``vertex_fraction``, ``closest_after`` and
-        ``tangent_weight``: its vertices are the data, its interpolated normals an estimate
-        (docs/fitting.md, "A fine sample of a smooth surface"). Any other value keeps the
-        normal-following defaults.
+        normals. docs/fitting.md measures both. On a detailed mesh whose vertices sample a
+        smooth surface (:func:`~sns_np.surface._targets.smooth_sampling`: a fine mesh whose
+        :func:`~sns_np.mesh.curvature_jitter` is at most ``SAMPLE_JITTER``, 0.15, or one
+        coarse for its curvature alone, rippled) "auto" takes 0 and with it that case's
+        ``vertex_fraction``, ``closest_after`` and ``tangent_weight`` (a rippled mesh also no
+        creases and an ``input_scale`` of at most ``RIPPLED_INPUT_SCALE``, 16): its vertices
+        are the data, its interpolated normals an estimate (docs/fitting.md, "A fine sample
+        of a smooth surface, by default"). Any other value keeps the normal-following
+        defaults.
     normal_huber : float, degrees in [0, 180]
         The angle beyond which a point's normal error counts by its size, not its square (a
         pseudo-Huber loss, :func:`~sns_np.surface.losses.position_normal_loss`), in both
@@ -456,13 +460,13 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         the interpolation's error into its targets (docs/fitting.md, "The mesh's vertices").
         0 draws on the faces only; a mesh only. Default: ``COARSE_VERTEX_FRACTION`` (0.25) on
         a coarse mesh (as for ``creases``: coarse for its size or for its curvature),
-        ``SAMPLE_VERTEX_FRACTION`` (0.5) on a fine sample of a smooth surface (as for
-        ``normal_weight``), 0 on any other mesh and on an analytic map.
+        ``SAMPLE_VERTEX_FRACTION`` (0.5) on a mesh whose vertices sample a smooth surface
+        (as for ``normal_weight``), 0 on any other mesh and on an analytic map.
     tangent_weight : float
         Weight of the tangential part of the position error (1: the plain squared distance);
         smaller values let points slide along the target (docs/fitting.md). Default: 1;
-        ``SAMPLE_TANGENT_WEIGHT`` (0.01) on a fine sample of a smooth surface (as for
-        ``normal_weight``), whose surface need not follow the embedding's piecewise-linear
+        ``SAMPLE_TANGENT_WEIGHT`` (0.01) on a mesh whose vertices sample a smooth surface (as
+        for ``normal_weight``), whose fit need not follow the embedding's piecewise-linear
         parameters of its points.
     closest_after : float in [0, 1]
         A mesh only: after this fraction of the fit (of the time budget, or of the steps),
@@ -474,8 +478,9 @@ def fit_sampler(target, *, metadata=None, net=None, elapsed_before=0.0, checkpoi
         the squared distance to the correspondence, which keeps the parametrisation from
         drifting without asking the network to follow the embedding's piecewise-linear
         stretch. Default: chosen from the target's detail (``AUTO``): 1 (never) for a smooth
-        mesh, 0.2 for a detailed one; 1 for an analytic map, a warm start and a fine sample
-        of a smooth surface (as for ``normal_weight``). docs/fitting.md, "The nearest-point phase".
+        mesh, 0.2 for a detailed one; 1 for an analytic map, a warm start and a mesh whose
+        vertices sample a smooth surface (as for ``normal_weight``). docs/fitting.md, "The
+        nearest-point phase".
     closest_normal_weight : float
         The weight of the nearest-point phase's normal term. Default: 50 times the mesh's
         mean face area in normalised units (total area 4 pi), at most 0.1 (``options.
