@@ -268,7 +268,9 @@ def _smooth_sample(target, o, net, read_out):
     for a detailed target (``read_out()``, the detail read-out, at least halfway to the
     detailed end): on a smooth one, fitted at a small scale in a short budget, the normals
     speed the fit (the demo's ellipsoid at 240 s: 0.227 deg / H 1.96% with them, 0.316 /
-    2.58% without; docs/fitting.md)."""
+    2.58% without; docs/fitting.md). A rippled mesh declined here keeps the normal-following
+    defaults but no creases: "auto" creases were decided with the embedding, before the
+    read-out (:class:`~sns_np.surface._targets._MeshTarget`)."""
     if net is not None or not hasattr(target, "smooth_sample") or o["normal_weight"] is not None:
         return None, None
     kind, why = target.smooth_sample
@@ -284,8 +286,8 @@ def _smooth_sample(target, o, net, read_out):
 
 def _vertex_fraction(target, sample=False):
     """The share of each batch drawn at the vertices, and why: ``COARSE_VERTEX_FRACTION`` on a
-    coarse mesh, ``SAMPLE_VERTEX_FRACTION`` on a fine sample of a smooth surface (``sample``),
-    0 otherwise (why None: no mesh)."""
+    coarse mesh, ``SAMPLE_VERTEX_FRACTION`` on a mesh whose vertices sample a smooth surface
+    (``sample``), 0 otherwise (why None: no mesh)."""
     coarse, kind = _coarse(target)
     if kind is None:
         return 0.0, None        # no vertices (an analytic map): nothing to choose
